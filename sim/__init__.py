@@ -1,0 +1,1 @@
+"""Nonlinear truth model of a momentum-biased Earth-pointing spacecraft."""
