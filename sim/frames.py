@@ -60,13 +60,19 @@ def dcm_from_euler312(yaw, roll, pitch) -> np.ndarray:
 def euler312_from_dcm(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return ``(yaw, roll, pitch)`` in rad from ``C_BR``.
 
-    Roll is taken from ``asin`` of a clipped element so that round-off just past
-    ±1 near gimbal lock (roll = ±90°) cannot produce NaN.
+    The angles are DESIGN.md's: φ = asin(C[1,2]), ψ = atan2(−C[1,0], C[1,1]),
+    θ = atan2(−C[0,2], C[2,2]).  They are *computed* more stably: ψ from row 1,
+    then ``M = C R3(ψ)ᵀ = R2(θ) R1(φ)``, whose entries give φ = atan2(M[1,2], M[1,1])
+    and θ = atan2(M[2,0], M[0,0]) without the asin's loss of precision near
+    roll = ±90°.  θ absorbs any round-off in ψ, so DCM → angles → DCM is exact to
+    round-off even at gimbal lock, where only ψ ± θ is defined: there ψ is whatever
+    the round-off in row 1 gives (0 for an exact matrix) and θ takes up the rest.
     """
     c = np.asarray(c, dtype=float)
-    roll = np.arcsin(np.clip(c[..., 1, 2], -1.0, 1.0))
     yaw = np.arctan2(-c[..., 1, 0], c[..., 1, 1])
-    pitch = np.arctan2(-c[..., 0, 2], c[..., 2, 2])
+    m = c @ np.swapaxes(rot3(yaw), -1, -2)
+    roll = np.arctan2(m[..., 1, 2], m[..., 1, 1])
+    pitch = np.arctan2(m[..., 2, 0], m[..., 0, 0])
     return yaw, roll, pitch
 
 
