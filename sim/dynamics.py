@@ -1,0 +1,98 @@
+"""Symbolic gyrostat dynamics and attitude kinematics (CasADi SX), DESIGN.md section 4.
+
+Two forms of the same Euler equation are provided, because the wheels can be
+driven two ways:
+
+* ``body_accel_from_wheel_accel``: the textbook gyrostat equation with the wheel
+  accelerations Ω̇ prescribed,
+  ``J ω̇ + Σ I_w Ω̇_i a_i = −ω × H + N``.  Its body-y and body-z wheel terms are
+  exactly Ḣ and ḣ, so with Ω̇ as the input it is the form the paper's Eqs. 3a–3c
+  (and Eq. 4, ḣ = N_w) linearise.  The Jacobian checks use it.
+* ``motor_torque_rates``: what the simulator integrates, with motor torques
+  ``u_i = I_w (Ω̇_i + a_i·ω̇)`` as inputs.  Eliminating Ω̇ gives
+  ``(J − Σ I_w a_i a_iᵀ) ω̇ = −ω × H + N − Σ u_i a_i``.
+
+J is the locked-wheel inertia of the whole spacecraft and Ω_i are speeds
+relative to the body; H = Jω + Σ I_w Ω_i a_i is then the total angular momentum.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+
+def skew(v):
+    """``[v×]`` for a 3-vector SX/MX."""
+    return ca.vertcat(ca.horzcat(0, -v[2], v[1]),
+                      ca.horzcat(v[2], 0, -v[0]),
+                      ca.horzcat(-v[1], v[0], 0))
+
+
+def dcm_from_quat(q):
+    """Frame rotation ``A(q)`` for a scalar-last quaternion (as in ``sim.frames``)."""
+    qv, q4 = q[0:3], q[3]
+    return (q4**2 - ca.dot(qv, qv)) * ca.DM.eye(3) + 2 * (qv @ qv.T) - 2 * q4 * skew(qv)
+
+
+def quat_rate(q, w_br):
+    """Kinematics ``q̇ = ½ Ξ(q) ω`` (Markley & Crassidis Eq. 3.20), ω = ω_BR in body axes."""
+    qv, q4 = q[0:3], q[3]
+    xi = ca.vertcat(q4 * ca.DM.eye(3) + skew(qv), -qv.T)
+    return 0.5 * (xi @ w_br)
+
+
+def total_momentum(w, wheel_speeds, J, Iw, A):
+    """H = J ω + Σ I_w Ω_i a_i (body axes).  ``A`` holds the spin axes as columns (3×n)."""
+    return J @ w + A @ (Iw * wheel_speeds)
+
+
+def body_accel_from_wheel_accel(w, wheel_speeds, wheel_accels, n_ext, J, Iw, A):
+    """ω̇ from ``J ω̇ = −ω × H + N − Σ I_w Ω̇_i a_i`` (prescribed wheel accelerations)."""
+    h_tot = total_momentum(w, wheel_speeds, J, Iw, A)
+    rhs = -ca.cross(w, h_tot) + n_ext - A @ (Iw * wheel_accels)
+    return ca.solve(J, rhs)
+
+
+def motor_torque_rates(w, wheel_speeds, u, n_ext, J, Js_inv, Iw, A):
+    """(ω̇, Ω̇) for motor torques u.  ``Js_inv = (J − Σ I_w a aᵀ)⁻¹`` is precomputed
+    numerically because it is constant for a run and a symbolic 3×3 solve in the
+    inner loop would only cost time."""
+    h_tot = total_momentum(w, wheel_speeds, J, Iw, A)
+    w_dot = Js_inv @ (-ca.cross(w, h_tot) + n_ext - A @ u)
+    wheel_accels = u / Iw - A.T @ w_dot
+    return w_dot, wheel_accels
+
+
+def euler312(c):
+    """(yaw, roll, pitch) from C_BR (DESIGN.md section 3); roll via atan2 so it
+    keeps full precision near ±90° (the numpy version also handles exact lock)."""
+    roll = ca.atan2(c[1, 2], ca.hypot(c[1, 0], c[1, 1]))
+    return (ca.atan2(-c[1, 0], c[1, 1]), roll, ca.atan2(-c[0, 2], c[2, 2]))
+
+
+def rot_about_y(angle):
+    """Active rotation by +angle about y: how an inertially fixed vector moves in the
+    orbit frame, which itself turns at −ω0 about y_R (DESIGN.md section 3)."""
+    c, s = ca.cos(angle), ca.sin(angle)
+    return ca.vertcat(ca.horzcat(c, 0, s), ca.horzcat(0, 1, 0), ca.horzcat(-s, 0, c))
+
+
+def gravity_gradient_torque(c_br, J, coef):
+    """``3μ/R³ · n̂ × J n̂`` with n̂ the nadir (z_R) in body axes; ``coef`` = 3μ/R³."""
+    n = c_br[:, 2]
+    return coef * ca.cross(n, J @ n)
+
+
+def solar_torque(c_br, sun_r, coef, lever_axis):
+    """Array–sail imbalance torque ``κ · d̂ × ŝ`` (paper Section 2.2).
+
+    d̂ is the array-to-sail centre-of-pressure direction (≈ pitch axis) and ŝ the
+    spacecraft-to-Sun unit vector, both in body axes.  ``coef`` = κ already scaled by
+    the shadow factor and (1 AU / r)²; the sign of κ sets the torque's phase.
+    """
+    return coef * ca.cross(lever_axis, c_br @ sun_r)
+
+
+def magnetic_torque(c_br, field_r, dipole_b):
+    """``m × B`` with B given in the orbit frame (constant there for a GEO satellite)."""
+    return ca.cross(dipole_b, c_br @ field_r)
