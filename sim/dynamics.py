@@ -73,7 +73,11 @@ def euler312(c):
 def rot_about_y(angle):
     """Active rotation by +angle about y: how an inertially fixed vector moves in the
     orbit frame, which itself turns at −ω0 about y_R (DESIGN.md section 3)."""
-    c, s = ca.cos(angle), ca.sin(angle)
+    return rot_about_y_cs(ca.cos(angle), ca.sin(angle))
+
+
+def rot_about_y_cs(c, s):
+    """``rot_about_y`` from a precomputed cosine and sine."""
     return ca.vertcat(ca.horzcat(c, 0, s), ca.horzcat(0, 1, 0), ca.horzcat(-s, 0, c))
 
 

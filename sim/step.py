@@ -31,7 +31,7 @@ from .spacecraft import Spacecraft
 def param_layout(n: int) -> tuple[tuple[str, tuple[int, int]], ...]:
     """Names and shapes of the packed parameter vector, in order."""
     return (("J", (3, 3)), ("Js_inv", (3, 3)), ("Iw", (n, 1)), ("A", (3, n)),
-            ("w0", (1, 1)), ("dt", (1, 1)), ("gg_coef", (1, 1)), ("solar_coef", (1, 1)),
+            ("w0", (1, 1)), ("dt", (1, 1)), ("sun_turn", (4, 1)), ("gg_coef", (1, 1)), ("solar_coef", (1, 1)),
             ("solar_axis", (3, 1)), ("m_res", (3, 1)), ("ctrl_on", (1, 1)),
             ("pitch_kp", (1, 1)), ("pitch_kd", (1, 1)), ("H_nom", (1, 1)),
             ("roll_kp", (1, 1)), ("roll_kd", (1, 1)), ("h_gain", (1, 1)),
@@ -81,6 +81,10 @@ def pack_params(spacecraft: Spacecraft, orbit: GeoOrbit, env: Environment,
     on = control.enabled
     vals = {
         "J": J, "Js_inv": np.linalg.inv(Js), "Iw": Iw, "A": A, "w0": w0, "dt": dt_s,
+        # cos/sin of the Sun's turn in the orbit frame over half and a whole step:
+        # constants of the run, so they are not recomputed in every step.
+        "sun_turn": [np.cos(w0 * dt_s / 2), np.sin(w0 * dt_s / 2),
+                     np.cos(w0 * dt_s), np.sin(w0 * dt_s)],
         "gg_coef": 3.0 * w0**2 * env.gravity_gradient.enabled,
         "solar_coef": env.solar.coefficient_Nm * env.solar.enabled,
         "solar_axis": np.asarray(env.solar.lever_axis),
@@ -146,8 +150,9 @@ def build_step(n: int) -> ca.Function:
         torques = _env_torques(xs[0:4], sun_r, ex, prm, m_cmd)
         return _rates(xs, u, torques[0] + torques[1] + torques[2] + ex["n_ext"], prm, n)
 
-    sun_half = dyn.rot_about_y(prm["w0"] * dt / 2) @ ex["sun_r"]
-    sun_full = dyn.rot_about_y(prm["w0"] * dt) @ ex["sun_r"]
+    turn = prm["sun_turn"]
+    sun_half = dyn.rot_about_y_cs(turn[0], turn[1]) @ ex["sun_r"]
+    sun_full = dyn.rot_about_y_cs(turn[2], turn[3]) @ ex["sun_r"]
     k1 = f(x, ex["sun_r"])
     k2 = f(x + dt / 2 * k1, sun_half)
     k3 = f(x + dt / 2 * k2, sun_half)
