@@ -1,0 +1,69 @@
+"""`make bench`: the speed figures the issues ask for, one line each.
+
+Format (DESIGN.md section 6): ``bench <name> <value> <unit>``.  Each figure is
+the median of several repetitions after a warm-up, because the machine is
+shared and noisy.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from sim.control import Control  # noqa: E402
+from sim.environment import Environment  # noqa: E402
+from sim.frames import GeoOrbit  # noqa: E402
+from sim.spacecraft import goes_next  # noqa: E402
+from sim.truth import InitialState, TruthModel, simulate_truth  # noqa: E402
+from tests.sim.conftest import EQUINOX  # noqa: E402
+
+DAY = 86400.0
+
+
+def report(name: str, value: float, unit: str) -> None:
+    print(f"bench {name} {value:.4g} {unit}", flush=True)
+
+
+def median_time(fn, repeats: int, warmup: int = 1) -> float:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def truth_day(model: TruthModel):
+    """One simulated day at 0.512 s output with every torque, the control and the
+    ripple on, including input generation and result assembly."""
+    rng = np.random.default_rng(1)
+    return simulate_truth(goes_next(), GeoOrbit(), Environment(), Control(),
+                          InitialState(yaw_rad=1e-3, roll_rad=5e-4), EQUINOX, DAY,
+                          rng=rng, model=model)
+
+
+def main() -> None:
+    with tempfile.TemporaryDirectory() as cache:
+        os.environ["DYNPROP_CACHE_DIR"] = cache
+        start = time.perf_counter()
+        compiled = TruthModel(2, backend="auto")
+        report("truth_compile_s", time.perf_counter() - start, "s")
+    report("truth_s_per_day", median_time(lambda: truth_day(compiled), repeats=7), "s")
+    if compiled.backend != "compiled":
+        print("bench note: no C compiler; truth_s_per_day ran in the VM", flush=True)
+    vm = TruthModel(2, backend="vm")
+    report("truth_vm_s_per_day", median_time(lambda: truth_day(vm), repeats=3), "s")
+
+
+if __name__ == "__main__":
+    main()

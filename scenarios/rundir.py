@@ -1,0 +1,48 @@
+"""Run directories that are written whole or not at all (DESIGN.md section 6)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+
+class RunDirError(ValueError):
+    """The output directory cannot be used (exists and is not empty, no --force)."""
+
+
+@contextlib.contextmanager
+def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
+    """Yield a temporary sibling directory; on success it replaces ``out``.
+
+    An existing non-empty ``out`` is refused unless ``force``.  If anything fails
+    while writing, ``out`` is left exactly as it was and the staging directory
+    is removed.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise RunDirError(f"--out {out}: exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise RunDirError(f"--out {out}: directory exists and is not empty (use --force)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    # mkdtemp makes 0700; give the finished directory the user's usual permissions.
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(stage, 0o777 & ~umask)
+    try:
+        yield stage
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    backup = None
+    if out.exists():
+        backup = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
+        os.rmdir(backup)
+        os.replace(out, backup)
+    os.replace(stage, out)
+    if backup is not None:
+        shutil.rmtree(backup, ignore_errors=True)
