@@ -31,7 +31,8 @@ from .spacecraft import Spacecraft
 def param_layout(n: int) -> tuple[tuple[str, tuple[int, int]], ...]:
     """Names and shapes of the packed parameter vector, in order."""
     return (("J", (3, 3)), ("Js_inv", (3, 3)), ("Iw", (n, 1)), ("A", (3, n)),
-            ("w0", (1, 1)), ("dt", (1, 1)), ("sun_turn", (4, 1)), ("gg_coef", (1, 1)), ("solar_coef", (1, 1)),
+            ("w0", (1, 1)), ("dt", (1, 1)), ("sun_turn", (4, 1)), ("gg_coef", (1, 1)),
+            ("solar_coef", (1, 1)),
             ("solar_axis", (3, 1)), ("m_res", (3, 1)), ("ctrl_on", (1, 1)),
             ("pitch_kp", (1, 1)), ("pitch_kd", (1, 1)), ("H_nom", (1, 1)),
             ("roll_kp", (1, 1)), ("roll_kd", (1, 1)), ("h_gain", (1, 1)),

@@ -31,7 +31,8 @@ def test_same_seed_gives_identical_files(tmp_path):
     for name in ("a", "b"):
         assert main(["truth", "--duration-s", "120", "--seed", "5", "--out",
                      str(tmp_path / name)]) == 0
-    assert (tmp_path / "a" / "truth.csv").read_bytes() == (tmp_path / "b" / "truth.csv").read_bytes()
+    a, b = (tmp_path / name / "truth.csv" for name in ("a", "b"))
+    assert a.read_bytes() == b.read_bytes()
 
 
 def test_existing_directory_is_refused_and_untouched(tmp_path, capsys):
