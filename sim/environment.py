@@ -73,10 +73,11 @@ class SolarTorque:
 class MagneticTorque:
     """Residual and control dipoles crossed with a tilted-dipole field (Section 2.2).
 
-    The residual dipole defaults to 8 A m² along pitch.  The paper quotes both
-    "about 8 A m²" and "at most 1e-7 N m"; with a ≈105 nT field at GEO those
-    agree only if the residual lies nearly along the field, i.e. along pitch, so
-    that only the ~10° dipole tilt produces torque (see docs/paper-errata.md).
+    The residual dipole defaults to 8 A m² along pitch, the body direction
+    closest to the ≈105 nT GEO field.  The paper quotes both "about 8 A m²" and
+    "at most 1e-7 N m"; those agree only for a dipole within ~7° of the local
+    field.  Along pitch at 75°W the tilted field still gives 2.6e-7 N m
+    (docs/paper-errata.md, entry 5).
 
     ``profile_*`` adds a prescribed, slowly varying control dipole
     ``A sin(2π t / period + phase)`` per body axis, on top of any closed-loop
