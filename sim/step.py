@@ -7,11 +7,13 @@ exogenous column.  So Monte Carlo sets with dispersed inertia never recompile.
 
 State ``x = [q_BR (4, scalar-last), ω_BN (3, body, rad/s), Ω (n, rad/s)]``.
 
-Exogenous column per step ``e = [ŝ_R (3), sun_scale, B_R (3, T), m_prof (3, A m²),
-N_ext (3, N m), ripple (n, N m)]``: the Sun unit vector in the orbit frame at the
-start of the step (rotated analytically inside the step), the shadow factor
-times (1 AU/r)², the geomagnetic field in the orbit frame, a prescribed control
-dipole, any extra body torque, and the motor-torque ripple held over the step.
+Time-varying inputs, one mapped input each so numpy arrays reach the compiled
+code without an interleaving copy (``input_layout``): ŝ_R (3), the Sun unit
+vector in the orbit frame at the start of the step (rotated analytically inside
+the step); sun_scale, the shadow factor times (1 AU/r)²; m_prof (3, A m²), a
+prescribed control dipole; n_ext (3, N m), any extra body torque; and ripple
+(n, N m), the motor-torque ripple held over the step.  The geomagnetic field is a
+parameter: for a geostationary satellite it is constant in the orbit frame.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import casadi as ca
 import numpy as np
 
 from . import dynamics as dyn
+from . import geomag
 from .control import Control, control_law, wheel_allocation
 from .environment import Environment
 from .frames import GeoOrbit
@@ -33,23 +36,20 @@ def param_layout(n: int) -> tuple[tuple[str, tuple[int, int]], ...]:
     return (("J", (3, 3)), ("Js_inv", (3, 3)), ("Iw", (n, 1)), ("A", (3, n)),
             ("w0", (1, 1)), ("dt", (1, 1)), ("sun_turn", (4, 1)), ("gg_coef", (1, 1)),
             ("solar_coef", (1, 1)),
-            ("solar_axis", (3, 1)), ("m_res", (3, 1)), ("ctrl_on", (1, 1)),
+            ("solar_axis", (3, 1)), ("m_res", (3, 1)), ("field_r", (3, 1)),
+            ("ctrl_on", (1, 1)),
             ("pitch_kp", (1, 1)), ("pitch_kd", (1, 1)), ("H_nom", (1, 1)),
             ("roll_kp", (1, 1)), ("roll_kd", (1, 1)), ("h_gain", (1, 1)),
             ("alloc", (n, 2)), ("mtq_gain", (1, 1)), ("mtq_max", (1, 1)))
 
 
-def exo_layout(n: int) -> tuple[tuple[str, int], ...]:
-    return (("sun_r", 3), ("sun_scale", 1), ("field_r", 3), ("m_prof", 3),
-            ("n_ext", 3), ("ripple", n))
+def input_layout(n: int) -> tuple[tuple[str, int], ...]:
+    """Names and sizes of the per-step (mapped) inputs, in call order after x."""
+    return (("sun_r", 3), ("sun_scale", 1), ("m_prof", 3), ("n_ext", 3), ("ripple", n))
 
 
 def n_params(n: int) -> int:
     return sum(r * c for _, (r, c) in param_layout(n))
-
-
-def n_exo(n: int) -> int:
-    return sum(k for _, k in exo_layout(n))
 
 
 def unpack_params(p, n: int) -> dict:
@@ -61,17 +61,17 @@ def unpack_params(p, n: int) -> dict:
     return out
 
 
-def unpack_exo(e, n: int) -> dict:
-    out, i = {}, 0
-    for name, k in exo_layout(n):
-        out[name] = e[i:i + k]
-        i += k
-    return out
-
-
 def pack_params(spacecraft: Spacecraft, orbit: GeoOrbit, env: Environment,
                 control: Control, dt_s: float) -> np.ndarray:
-    """Numeric parameter vector in ``param_layout`` order."""
+    """Numeric parameter vector in ``param_layout`` order.
+
+    The field is that of a geostationary satellite at the orbit's longitude,
+    zero when the magnetic environment is switched off (which also disables the
+    torquers, as it would in orbit)."""
+    mag = env.magnetic
+    field_r = geomag.geo_field_orbit_frame(
+        orbit.longitude_rad, orbit.radius_m, moment_Am2=mag.earth_dipole_Am2,
+        pole_lat_deg=mag.pole_lat_deg, pole_lon_deg=mag.pole_lon_deg) * mag.enabled
     n = spacecraft.n_wheels
     J = spacecraft.J
     A = spacecraft.wheel_axes.T
@@ -89,7 +89,7 @@ def pack_params(spacecraft: Spacecraft, orbit: GeoOrbit, env: Environment,
         "gg_coef": 3.0 * w0**2 * env.gravity_gradient.enabled,
         "solar_coef": env.solar.coefficient_Nm * env.solar.enabled,
         "solar_axis": np.asarray(env.solar.lever_axis),
-        "m_res": np.asarray(env.magnetic.residual_dipole_Am2),
+        "m_res": np.asarray(env.magnetic.residual_dipole_Am2), "field_r": field_r,
         "ctrl_on": float(on),
         "pitch_kp": Iy * control.pitch_bandwidth_radps**2,
         "pitch_kd": Iy * 2.0 * control.pitch_damping * control.pitch_bandwidth_radps,
@@ -120,7 +120,7 @@ def _env_torques(q, sun_r, ex, prm, m_ctrl):
     t_gg = dyn.gravity_gradient_torque(c_br, prm["J"], prm["gg_coef"])
     t_sol = dyn.solar_torque(c_br, sun_r, prm["solar_coef"] * ex["sun_scale"],
                              prm["solar_axis"])
-    t_mag = dyn.magnetic_torque(c_br, ex["field_r"], prm["m_res"] + ex["m_prof"] + m_ctrl)
+    t_mag = dyn.magnetic_torque(c_br, prm["field_r"], prm["m_res"] + ex["m_prof"] + m_ctrl)
     return t_gg, t_sol, t_mag
 
 
@@ -136,15 +136,14 @@ def build_step(n: int) -> ca.Function:
     start of the step (see ``aux_layout``).
     """
     x = ca.SX.sym("x", 7 + n)
-    e = ca.SX.sym("e", n_exo(n))
+    ex = {name: ca.SX.sym(name, k) for name, k in input_layout(n)}
     p = ca.SX.sym("p", n_params(n))
     prm = unpack_params(p, n)
-    ex = unpack_exo(e, n)
     dt = prm["dt"]
 
     c_br0 = dyn.dcm_from_quat(x[0:4])
     w_br0 = x[4:7] - c_br0 @ ca.vertcat(0, -prm["w0"], 0)
-    u_cmd, m_cmd = control_law(c_br0, w_br0, x[7:7 + n], ex["field_r"], prm)
+    u_cmd, m_cmd = control_law(c_br0, w_br0, x[7:7 + n], prm["field_r"], prm)
     u = u_cmd + ex["ripple"]
 
     def f(xs, sun_r):
@@ -170,7 +169,9 @@ def build_step(n: int) -> ca.Function:
     # Common-subexpression elimination: the RK4 stages rebuild the same DCM terms;
     # cse() trims the step by about a fifth for both the VM and compiled code.
     xn, aux = ca.vertsplit(ca.cse(ca.vertcat(xn, aux)), [0, xn.numel(), xn.numel() + aux.numel()])
-    return ca.Function(f"dynprop_step{n}", [x, e, p], [xn, aux], ["x", "e", "p"], ["xn", "aux"])
+    names = [name for name, _ in input_layout(n)]
+    return ca.Function(f"dynprop_step{n}", [x, *(ex[k] for k in names), p], [xn, aux],
+                       ["x", *names, "p"], ["xn", "aux"])
 
 
 def aux_layout(n: int) -> tuple[tuple[str, int], ...]:
@@ -192,17 +193,17 @@ def split_aux(aux: np.ndarray, n: int) -> dict[str, np.ndarray]:
 
 
 def build_chunk(n: int, chunk: int) -> ca.Function:
-    """``chunk`` RK4 steps via ``mapaccum``: ``(x0, E[n_e×chunk], p) -> (X, AUX)``.
+    """``chunk`` RK4 steps via ``mapaccum``: ``(x0, inputs…, p) -> (X, AUX)``.
 
-    X holds the states after each step, AUX the step-start auxiliaries.  The
-    parameter vector enters once and is repeated symbolically, so callers pass it
-    a single time per chunk.
+    Each per-step input is a (k × chunk) matrix, X holds the states after each
+    step and AUX the step-start auxiliaries.  The parameter vector enters once
+    and is repeated symbolically, so callers pass it a single time per chunk.
     """
     step = build_step(n)
     acc = step.mapaccum(f"dynprop_acc{n}_{chunk}", chunk, [0], [0])
     x0 = ca.MX.sym("x0", 7 + n)
-    e = ca.MX.sym("E", n_exo(n), chunk)
+    mapped = [ca.MX.sym(name, k, chunk) for name, k in input_layout(n)]
     p = ca.MX.sym("p", n_params(n))
-    xs, aux = acc(x0, e, ca.repmat(p, 1, chunk))
-    return ca.Function(f"dynprop_chunk{n}_{chunk}", [x0, e, p], [xs, aux],
-                       ["x0", "E", "p"], ["X", "AUX"])
+    xs, aux = acc(x0, *mapped, ca.repmat(p, 1, chunk))
+    return ca.Function(f"dynprop_chunk{n}_{chunk}", [x0, *mapped, p], [xs, aux],
+                       ["x0", *(name for name, _ in input_layout(n)), "p"], ["X", "AUX"])

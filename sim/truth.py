@@ -15,13 +15,13 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import ephemeris, geomag
+from . import ephemeris
 from .compiled import compile_function, requested_backend
 from .control import Control
 from .environment import Environment
 from .frames import GeoOrbit, dcm_from_quat, quat_from_euler312
 from .spacecraft import Spacecraft
-from .step import build_chunk, n_aux, n_exo, pack_params, split_aux
+from .step import build_chunk, input_layout, n_aux, pack_params, split_aux
 
 AU_M = 149_597_870_700.0
 DEFAULT_CHUNK = 4096
@@ -104,27 +104,32 @@ class TruthModel:
         self.chunk = chunk
         self.function, self.backend = compile_function(build_chunk(n_wheels, chunk), backend)
 
-    def rollout(self, x0: np.ndarray, exo: np.ndarray, p: np.ndarray
+    def rollout(self, x0: np.ndarray, inputs: dict[str, np.ndarray], p: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
-        """Run ``len(exo)`` steps.  Returns states (N+1, n_x) incl. x0, and aux (N, n_aux)."""
-        n_steps, nx, c = exo.shape[0], x0.size, self.chunk
+        """Run one step per row of the per-step ``inputs`` (``step.input_layout``
+        names, each (N, k)).  Returns states (N+1, n_x) including x0, and aux (N, n_aux).
+        """
+        layout = input_layout(self.n_wheels)
+        arrays = [np.ascontiguousarray(inputs[name], dtype=float).reshape(-1, k)
+                  for name, k in layout]
+        n_steps, nx, c = arrays[0].shape[0], x0.size, self.chunk
         states = np.empty((n_steps + 1, nx))
         states[0] = x0
         aux = np.empty((n_steps, n_aux(self.n_wheels)))
         p = np.ascontiguousarray(p, dtype=float)
-        exo = np.ascontiguousarray(exo, dtype=float)
         buf, run = self.function.buffer()
         for start in range(0, n_steps, c):
             stop = min(start + c, n_steps)
             full = stop - start == c
-            e_blk = exo[start:stop] if full else _pad(exo[start:stop], c)
+            blocks = [a[start:stop] if full else _pad(a[start:stop], c) for a in arrays]
             x_out = states[start + 1:stop + 1] if full else np.empty((c, nx))
             a_out = aux[start:stop] if full else np.empty((c, aux.shape[1]))
             x_in = states[start].copy()
             # The buffer keeps raw pointers: every array must stay alive until run().
             buf.set_arg(0, memoryview(x_in))
-            buf.set_arg(1, memoryview(e_blk.reshape(-1)))
-            buf.set_arg(2, memoryview(p))
+            for i, blk in enumerate(blocks, start=1):
+                buf.set_arg(i, memoryview(blk.reshape(-1)))
+            buf.set_arg(len(blocks) + 1, memoryview(p))
             buf.set_res(0, memoryview(x_out.reshape(-1)))
             buf.set_res(1, memoryview(a_out.reshape(-1)))
             run()
@@ -150,41 +155,33 @@ def truth_model(n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str = "auto"
     return TruthModel(n_wheels, chunk, backend)
 
 
-def exogenous_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environment,
-                     n_wheels: int, ripple: np.ndarray, extra_torque: np.ndarray | None
-                     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Per-step exogenous matrix (N, n_exo) and the named pieces for the result."""
+def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environment,
+                ripple: np.ndarray, extra_torque: np.ndarray | None
+                ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Per-step inputs of ``step.input_layout`` on the output grid, and the shadow."""
+    n = len(t_s)
     jd0 = ephemeris.julian_date(epoch)
     alpha = orbit.right_ascension(t_s, ephemeris.gmst_rad(jd0))
     ca_, sa = np.cos(alpha), np.sin(alpha)
     sun_n, sun_dist = _sun_on_grid(t_s, jd0)
     # ŝ_R = C_RN ŝ_N with the closed-form equatorial orbit frame (GeoOrbit.orbit_frame).
-    sun_r = np.empty_like(sun_n)
+    sun_r = np.empty((n, 3))
     sun_r[:, 0] = -sa * sun_n[:, 0] + ca_ * sun_n[:, 1]
     sun_r[:, 1] = -sun_n[:, 2]
     sun_r[:, 2] = -ca_ * sun_n[:, 0] - sa * sun_n[:, 1]
-    r_sat = orbit.radius_m * np.stack([ca_, sa, np.zeros_like(ca_)], axis=-1)
-    shadow = _shadow_on_grid(r_sat, sun_n, sun_dist, env.shadow_model)
+    shadow = _shadow_on_grid(orbit.radius_m * np.stack([ca_, sa, np.zeros(n)], axis=-1),
+                             sun_n, sun_dist, env.shadow_model)
     mag = env.magnetic
-    field_r = geomag.geo_field_orbit_frame(orbit.longitude_rad, orbit.radius_m,
-                                           moment_Am2=mag.earth_dipole_Am2,
-                                           pole_lat_deg=mag.pole_lat_deg,
-                                           pole_lon_deg=mag.pole_lon_deg) * mag.enabled
-    n = len(t_s)
+    if mag.enabled and np.any(mag.profile_amplitude_Am2):
+        m_prof = mag.profile(t_s)
+    else:
+        m_prof = np.zeros((n, 3))
     n_ext = np.zeros((n, 3)) if extra_torque is None else np.asarray(extra_torque, float)
     if n_ext.shape != (n, 3):
         raise ValueError(f"extra torque must have shape ({n}, 3)")
-    exo = np.empty((n, n_exo(n_wheels)))
-    exo[:, 0:3] = sun_r
-    exo[:, 3] = shadow * (AU_M / sun_dist) ** 2
-    exo[:, 4:7] = field_r
-    if mag.enabled and np.any(mag.profile_amplitude_Am2):
-        exo[:, 7:10] = mag.profile(t_s)
-    else:
-        exo[:, 7:10] = 0.0
-    exo[:, 10:13] = n_ext
-    exo[:, 13:] = ripple
-    return exo, {"sun_r": sun_r, "shadow": shadow, "n_ext": n_ext}
+    inputs = {"sun_r": sun_r, "sun_scale": shadow * (AU_M / sun_dist) ** 2,
+              "m_prof": m_prof, "n_ext": n_ext, "ripple": ripple}
+    return inputs, shadow
 
 
 def _shadow_on_grid(r_sat: np.ndarray, sun_n: np.ndarray, sun_dist: np.ndarray, model: str,
@@ -257,15 +254,15 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
         ripple = sigma * rng.standard_normal((n_samples, n))
     else:
         ripple = np.zeros((n_samples, n))
-    exo, pieces = exogenous_inputs(t_s, epoch, orbit, environment, n, ripple, extra_torque)
+    inputs, shadow = step_inputs(t_s, epoch, orbit, environment, ripple, extra_torque)
     p = pack_params(spacecraft, orbit, environment, control, dt_s)
     model = model or truth_model(n, DEFAULT_CHUNK, requested_backend())
     # One step per output sample: the last step's end state is kept as final_state.
-    states, aux = model.rollout(initial.state_vector(spacecraft, orbit), exo, p)
-    return _result(t_s, states, aux, ripple, pieces, spacecraft, orbit, model.backend)
+    states, aux = model.rollout(initial.state_vector(spacecraft, orbit), inputs, p)
+    return _result(t_s, states, aux, inputs, shadow, spacecraft, model.backend)
 
 
-def _result(t_s, states, aux, ripple, pieces, spacecraft, orbit, backend) -> TruthResult:
+def _result(t_s, states, aux, inputs, shadow, spacecraft, backend) -> TruthResult:
     n = spacecraft.n_wheels
     a = split_aux(aux, n)
     x = states[:-1]
@@ -275,12 +272,12 @@ def _result(t_s, states, aux, ripple, pieces, spacecraft, orbit, backend) -> Tru
         "solar": a["t_solar"],
         "magnetic": a["t_mag"],
         "wheel_control": -a["u_cmd"] @ axes,
-        "wheel_ripple": -ripple @ axes,
-        "external": pieces["n_ext"],
+        "wheel_ripple": -inputs["ripple"] @ axes,
+        "external": inputs["n_ext"],
     }
     return TruthResult(
         t_s=t_s, q_br=x[:, 0:4], w_bn_radps=x[:, 4:7], w_br_radps=a["w_br"],
         wheel_speeds_radps=x[:, 7:], h_Nms=a["h"], H_Nms=a["H"], torques=torques,
         wheel_command_Nm=a["u_cmd"], torquer_dipole_Am2=a["m_cmd"], sun_body=a["sun_b"],
-        sun_orbit_frame=pieces["sun_r"], shadow=pieces["shadow"], final_state=states[-1],
+        sun_orbit_frame=inputs["sun_r"], shadow=shadow, final_state=states[-1],
         backend=backend, euler_rad=a["euler"])
