@@ -21,7 +21,9 @@ import casadi as ca
 
 log = logging.getLogger(__name__)
 
-CFLAGS = ("-O3", "-fPIC", "-shared")
+# -ffp-contract=off: no fused multiply-adds, so results do not depend on whether
+# the target has FMA (bit-identical runs across machines of one architecture).
+CFLAGS = ("-O3", "-ffp-contract=off", "-fPIC", "-shared")
 
 
 def cache_dir() -> Path:
@@ -54,7 +56,8 @@ def compile_function(f: ca.Function, backend: str | None = None) -> tuple[ca.Fun
     if cc is None:
         if backend == "compiled":
             raise RuntimeError("no C compiler found for DYNPROP_BACKEND=compiled")
-        log.info("no C compiler found; %s runs in the CasADi VM", f.name())
+        log.warning("no C compiler found; %s runs in the CasADi VM (slower, and its "
+                    "results differ from compiled ones in the last bits)", f.name())
         return f, "vm"
     gen = ca.CodeGenerator(f"{f.name()}.c", {"with_header": False})
     gen.add(f)

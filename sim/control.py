@@ -12,9 +12,13 @@ momentum-bias design, yaw is controlled only through roll/yaw coupling.
 * Roll/yaw through magnetic torquers: momentum unloading with the cross-product
   law ``m = B × T_des / |B|²``, ``T_des = −k_m h ẑ``, each axis saturated.
 
-The default gains put the closed-loop nutation time constant near 13 min and the
-slow orbit-rate (yaw) mode near 5 h on the GOES-Next defaults; the test suite
-checks closed-loop stability on the nonlinear step's Jacobian.
+The default gains put the closed-loop nutation time constant near 16 min and the
+slow orbit-rate (yaw) mode near 4 h on the GOES-Next defaults (eigenvalues of the
+nonlinear step's Jacobian, checked by the tests).  Only an external torque can
+damp the orbit-rate mode: the total inertial momentum is conserved and the wheels
+store only pitch and yaw momentum, so with magnetic unloading off that mode is
+neutral (a physical limit of wheel-only momentum-bias control, also tested).
+Each loop can be switched off on its own.
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ from .dynamics import euler312
 @dataclass(frozen=True)
 class Control:
     enabled: bool = True
+    pitch_loop: bool = True
+    roll_yaw_loop: bool = True
     pitch_bandwidth_radps: float = 0.02
     pitch_damping: float = 0.7
     roll_gain_per_s: float = 0.01          # k_r
@@ -73,7 +79,7 @@ def control_law(c_br, w_br, wheel_speeds, field_r, prm):
 
     field_b = c_br @ field_r
     t_des = ca.vertcat(0, 0, -prm["mtq_gain"] * h)
-    # The tiny floor keeps m finite (and zero) when the magnetic field is switched off.
+    # The tiny floor keeps m finite (and zero) if the field is ever zero.
     m = ca.cross(field_b, t_des) / (ca.dot(field_b, field_b) + 1e-30)
     m_max = prm["mtq_max"]
     m = on * ca.fmin(ca.fmax(m, -m_max), m_max)

@@ -64,10 +64,29 @@ def motor_torque_rates(w, wheel_speeds, u, n_ext, J, Js_inv, Iw, A):
 
 
 def euler312(c):
-    """(yaw, roll, pitch) from C_BR (DESIGN.md section 3); roll via atan2 so it
-    keeps full precision near ±90° (the numpy version also handles exact lock)."""
-    roll = ca.atan2(c[1, 2], ca.hypot(c[1, 0], c[1, 1]))
-    return (ca.atan2(-c[1, 0], c[1, 1]), roll, ca.atan2(-c[0, 2], c[2, 2]))
+    """(yaw, roll, pitch) from C_BR, computed as ``sim.frames.euler312_from_dcm``:
+    ψ from row 1, then roll and pitch from ``M = C R3(ψ)ᵀ = R2(θ) R1(φ)``, whose
+    cos ψ, sin ψ come from row 1 without trigonometry.  Exact to round-off near
+    and at gimbal lock (there ψ = 0 and θ carries ψ ± θ)."""
+    rho = ca.hypot(c[1, 0], c[1, 1])
+    at_lock = rho == 0
+    cy = ca.if_else(at_lock, 1.0, c[1, 1] / ca.if_else(at_lock, 1.0, rho))
+    sy = ca.if_else(at_lock, 0.0, -c[1, 0] / ca.if_else(at_lock, 1.0, rho))
+    yaw = ca.atan2(-c[1, 0], c[1, 1])
+    roll = ca.atan2(c[1, 2], rho)
+    pitch = ca.atan2(c[2, 0] * cy + c[2, 1] * sy, c[0, 0] * cy + c[0, 1] * sy)
+    return yaw, roll, pitch
+
+
+def dcm_from_euler312(yaw, roll, pitch):
+    """``C_BR = R2(pitch) R1(roll) R3(yaw)``, symbolic (as ``sim.frames``)."""
+    cy, sy = ca.cos(yaw), ca.sin(yaw)
+    cr, sr = ca.cos(roll), ca.sin(roll)
+    cp, sp = ca.cos(pitch), ca.sin(pitch)
+    r3 = ca.vertcat(ca.horzcat(cy, sy, 0), ca.horzcat(-sy, cy, 0), ca.horzcat(0, 0, 1))
+    r1 = ca.vertcat(ca.horzcat(1, 0, 0), ca.horzcat(0, cr, sr), ca.horzcat(0, -sr, cr))
+    r2 = ca.vertcat(ca.horzcat(cp, 0, -sp), ca.horzcat(0, 1, 0), ca.horzcat(sp, 0, cp))
+    return r2 @ r1 @ r3
 
 
 def rot_about_y(angle):

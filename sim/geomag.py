@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .frames import GEO_RADIUS_M
+
 MU0_OVER_4PI = 1.0e-7
 """mu0 / (4 pi) [T m / A] (exact in the pre-2019 SI; the 2019 change is ~1e-10 relative)."""
 IGRF_REF_RADIUS_M = 6_371_200.0
@@ -38,7 +40,6 @@ POLE_LAT_DEG = 90.0 - float(np.rad2deg(np.arccos(-IGRF14_2025_G10_T / _B0_T)))
 POLE_LON_DEG = float(np.rad2deg(np.arctan2(-IGRF14_2025_H11_T, -IGRF14_2025_G11_T)))
 """North geomagnetic pole east longitude [deg], about -72.76."""
 
-GEO_RADIUS_M = 42_164_170.0
 """Geostationary orbit radius [m]."""
 
 

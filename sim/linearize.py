@@ -24,22 +24,6 @@ from .frames import GeoOrbit
 from .spacecraft import Spacecraft
 
 
-def _dcm312(yaw, roll, pitch):
-    def r1(a):
-        return ca.vertcat(ca.horzcat(1, 0, 0), ca.horzcat(0, ca.cos(a), ca.sin(a)),
-                          ca.horzcat(0, -ca.sin(a), ca.cos(a)))
-
-    def r3(a):
-        return ca.vertcat(ca.horzcat(ca.cos(a), ca.sin(a), 0),
-                          ca.horzcat(-ca.sin(a), ca.cos(a), 0), ca.horzcat(0, 0, 1))
-
-    def r2(a):
-        return ca.vertcat(ca.horzcat(ca.cos(a), 0, -ca.sin(a)), ca.horzcat(0, 1, 0),
-                          ca.horzcat(ca.sin(a), 0, ca.cos(a)))
-
-    return r2(pitch) @ r1(roll) @ r3(yaw)
-
-
 @dataclass(frozen=True)
 class EulerLinearization:
     """Jacobians of (ψ̈, φ̈, θ̈) at the nominal state.
@@ -79,11 +63,12 @@ def euler_angle_accelerations(spacecraft: Spacecraft, orbit: GeoOrbit,
     wheel_accels = to_wheels @ ca.vertcat(H_dot, h_dot)
 
     yaw, roll, pitch = ang[0], ang[1], ang[2]
-    c_br = _dcm312(yaw, roll, pitch)
+    c_br = dyn.dcm_from_euler312(yaw, roll, pitch)
     w_rn = ca.vertcat(0, -w0, 0)
     # ω_BR from 3-1-2 rates: yaw about R's z, roll about the once-rotated x, pitch about body y.
-    w_br = (_dcm312(0, roll, pitch) @ ca.vertcat(0, 0, rate[0])
-            + _dcm312(0, 0, pitch) @ ca.vertcat(rate[1], 0, 0) + ca.vertcat(0, rate[2], 0))
+    w_br = (dyn.dcm_from_euler312(0, roll, pitch) @ ca.vertcat(0, 0, rate[0])
+            + dyn.dcm_from_euler312(0, 0, pitch) @ ca.vertcat(rate[1], 0, 0)
+            + ca.vertcat(0, rate[2], 0))
     w_bn = w_br + c_br @ w_rn
     torque = n_ext
     if gravity_gradient:

@@ -11,8 +11,9 @@ Time-varying inputs, one mapped input each so numpy arrays reach the compiled
 code without an interleaving copy (``input_layout``): ŝ_R (3), the Sun unit
 vector in the orbit frame at the start of the step (rotated analytically inside
 the step); sun_scale, the shadow factor times (1 AU/r)²; m_prof (3, A m²), a
-prescribed control dipole; n_ext (3, N m), any extra body torque; and ripple
-(n, N m), the motor-torque ripple held over the step.  The geomagnetic field is a
+prescribed control dipole; n_ext (3, N m), any extra body torque; u_wheel (n, N m),
+motor torques added to the control's (a momentum dump, a test profile); and
+ripple (n, N m), the motor-torque ripple held over the step.  The geomagnetic field is a
 parameter: for a geostationary satellite it is constant in the orbit frame.
 """
 
@@ -45,7 +46,8 @@ def param_layout(n: int) -> tuple[tuple[str, tuple[int, int]], ...]:
 
 def input_layout(n: int) -> tuple[tuple[str, int], ...]:
     """Names and sizes of the per-step (mapped) inputs, in call order after x."""
-    return (("sun_r", 3), ("sun_scale", 1), ("m_prof", 3), ("n_ext", 3), ("ripple", n))
+    return (("sun_r", 3), ("sun_scale", 1), ("m_prof", 3), ("n_ext", 3), ("u_wheel", n),
+            ("ripple", n))
 
 
 def n_params(n: int) -> int:
@@ -65,13 +67,14 @@ def pack_params(spacecraft: Spacecraft, orbit: GeoOrbit, env: Environment,
                 control: Control, dt_s: float) -> np.ndarray:
     """Numeric parameter vector in ``param_layout`` order.
 
-    The field is that of a geostationary satellite at the orbit's longitude,
-    zero when the magnetic environment is switched off (which also disables the
-    torquers, as it would in orbit)."""
+    The field is that of a geostationary satellite at the orbit's longitude.  It
+    is always present: ``environment.magnetic.enabled`` switches the magnetic
+    *disturbance* (residual and prescribed dipoles), while the torquers belong
+    to the control and keep working."""
     mag = env.magnetic
     field_r = geomag.geo_field_orbit_frame(
         orbit.longitude_rad, orbit.radius_m, moment_Am2=mag.earth_dipole_Am2,
-        pole_lat_deg=mag.pole_lat_deg, pole_lon_deg=mag.pole_lon_deg) * mag.enabled
+        pole_lat_deg=mag.pole_lat_deg, pole_lon_deg=mag.pole_lon_deg)
     n = spacecraft.n_wheels
     J = spacecraft.J
     A = spacecraft.wheel_axes.T
@@ -80,6 +83,7 @@ def pack_params(spacecraft: Spacecraft, orbit: GeoOrbit, env: Environment,
     w0 = orbit.rate_radps
     Iy = J[1, 1]
     on = control.enabled
+    pitch, roll_yaw = float(control.pitch_loop), float(control.roll_yaw_loop)
     vals = {
         "J": J, "Js_inv": np.linalg.inv(Js), "Iw": Iw, "A": A, "w0": w0, "dt": dt_s,
         # cos/sin of the Sun's turn in the orbit frame over half and a whole step:
@@ -89,13 +93,14 @@ def pack_params(spacecraft: Spacecraft, orbit: GeoOrbit, env: Environment,
         "gg_coef": 3.0 * w0**2 * env.gravity_gradient.enabled,
         "solar_coef": env.solar.coefficient_Nm * env.solar.enabled,
         "solar_axis": np.asarray(env.solar.lever_axis),
-        "m_res": np.asarray(env.magnetic.residual_dipole_Am2), "field_r": field_r,
+        "m_res": np.asarray(mag.residual_dipole_Am2) * mag.enabled, "field_r": field_r,
         "ctrl_on": float(on),
-        "pitch_kp": Iy * control.pitch_bandwidth_radps**2,
-        "pitch_kd": Iy * 2.0 * control.pitch_damping * control.pitch_bandwidth_radps,
+        "pitch_kp": Iy * control.pitch_bandwidth_radps**2 * pitch,
+        "pitch_kd": Iy * 2.0 * control.pitch_damping * control.pitch_bandwidth_radps * pitch,
         "H_nom": spacecraft.pitch_bias_Nms(),
-        "roll_kp": control.roll_gain_per_s, "roll_kd": control.roll_rate_gain,
-        "h_gain": control.yaw_momentum_gain_per_s,
+        "roll_kp": control.roll_gain_per_s * roll_yaw,
+        "roll_kd": control.roll_rate_gain * roll_yaw,
+        "h_gain": control.yaw_momentum_gain_per_s * roll_yaw,
         "alloc": wheel_allocation(spacecraft.wheel_axes),
         "mtq_gain": control.unloading_gain_per_s * control.magnetic_unloading,
         "mtq_max": control.torquer_max_Am2,
@@ -116,12 +121,14 @@ def _rates(x, u, n_ext_total, prm, n: int):
 
 
 def _env_torques(q, sun_r, ex, prm, m_ctrl):
+    """Gravity gradient, solar, magnetic disturbance and magnetic control torques."""
     c_br = dyn.dcm_from_quat(q)
     t_gg = dyn.gravity_gradient_torque(c_br, prm["J"], prm["gg_coef"])
     t_sol = dyn.solar_torque(c_br, sun_r, prm["solar_coef"] * ex["sun_scale"],
                              prm["solar_axis"])
-    t_mag = dyn.magnetic_torque(c_br, prm["field_r"], prm["m_res"] + ex["m_prof"] + m_ctrl)
-    return t_gg, t_sol, t_mag
+    t_mag = dyn.magnetic_torque(c_br, prm["field_r"], prm["m_res"] + ex["m_prof"])
+    t_mtq = dyn.magnetic_torque(c_br, prm["field_r"], m_ctrl)
+    return t_gg, t_sol, t_mag, t_mtq
 
 
 @lru_cache(maxsize=8)
@@ -132,7 +139,7 @@ def build_step(n: int) -> ca.Function:
     held (zero-order hold); environment torques are re-evaluated at each RK4
     stage, with the Sun vector rotated to the stage time.  The quaternion is
     renormalised after the step.  ``aux`` = [u_cmd (n), m_cmd (3), T_gg (3),
-    T_solar (3), T_mag (3), yaw, roll, pitch, ω_BR (3), ŝ_B (3), H, h], all at the
+    T_solar (3), T_mag (3), T_torquer (3), yaw, roll, pitch, ω_BR (3), ŝ_B (3), H, h], at the
     start of the step (see ``aux_layout``).
     """
     x = ca.SX.sym("x", 7 + n)
@@ -144,11 +151,11 @@ def build_step(n: int) -> ca.Function:
     c_br0 = dyn.dcm_from_quat(x[0:4])
     w_br0 = x[4:7] - c_br0 @ ca.vertcat(0, -prm["w0"], 0)
     u_cmd, m_cmd = control_law(c_br0, w_br0, x[7:7 + n], prm["field_r"], prm)
-    u = u_cmd + ex["ripple"]
+    u = u_cmd + ex["u_wheel"] + ex["ripple"]
 
     def f(xs, sun_r):
         torques = _env_torques(xs[0:4], sun_r, ex, prm, m_cmd)
-        return _rates(xs, u, torques[0] + torques[1] + torques[2] + ex["n_ext"], prm, n)
+        return _rates(xs, u, sum(torques[1:], torques[0]) + ex["n_ext"], prm, n)
 
     turn = prm["sun_turn"]
     sun_half = dyn.rot_about_y_cs(turn[0], turn[1]) @ ex["sun_r"]
@@ -160,11 +167,11 @@ def build_step(n: int) -> ca.Function:
     xn = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     xn = ca.vertcat(xn[0:4] / ca.norm_2(xn[0:4]), xn[4:])
 
-    t_gg, t_sol, t_mag = _env_torques(x[0:4], ex["sun_r"], ex, prm, m_cmd)
+    t_gg, t_sol, t_mag, t_mtq = _env_torques(x[0:4], ex["sun_r"], ex, prm, m_cmd)
     # Output conversions are done here, in compiled code, rather than as numpy
     # passes over (N, 3, 3) histories afterwards.
     wheel_h = prm["A"] @ (prm["Iw"] * x[7:7 + n])
-    aux = ca.vertcat(u_cmd, m_cmd, t_gg, t_sol, t_mag, *dyn.euler312(c_br0), w_br0,
+    aux = ca.vertcat(u_cmd, m_cmd, t_gg, t_sol, t_mag, t_mtq, *dyn.euler312(c_br0), w_br0,
                      c_br0 @ ex["sun_r"], wheel_h[1], wheel_h[2])
     # Common-subexpression elimination: the RK4 stages rebuild the same DCM terms;
     # cse() trims the step by about a fifth for both the VM and compiled code.
@@ -176,7 +183,7 @@ def build_step(n: int) -> ca.Function:
 
 def aux_layout(n: int) -> tuple[tuple[str, int], ...]:
     return (("u_cmd", n), ("m_cmd", 3), ("t_gg", 3), ("t_solar", 3), ("t_mag", 3),
-            ("euler", 3), ("w_br", 3), ("sun_b", 3), ("H", 1), ("h", 1))
+            ("t_mtq", 3), ("euler", 3), ("w_br", 3), ("sun_b", 3), ("H", 1), ("h", 1))
 
 
 def n_aux(n: int) -> int:

@@ -23,8 +23,8 @@ from .frames import GeoOrbit, dcm_from_quat, quat_from_euler312
 from .spacecraft import Spacecraft
 from .step import build_chunk, input_layout, n_aux, pack_params, split_aux
 
-AU_M = 149_597_870_700.0
 DEFAULT_CHUNK = 4096
+TAIL_CHUNK = 256  # a short run's or a long run's last steps, without 4096-step padding
 
 
 @dataclass(frozen=True)
@@ -58,8 +58,10 @@ class TruthResult:
     """Truth histories on the output grid (SI units, body axes unless named).
 
     ``torques`` maps a source name to an (N, 3) body torque in N m:
-    gravity_gradient, solar, magnetic, wheel_control (the reaction of the
-    commanded motor torques on the body), wheel_ripple and external.
+    gravity_gradient, solar, magnetic (residual and prescribed dipoles),
+    magnetic_control (the torquers), wheel_control (the reaction of the control's
+    motor torques on the body), wheel_input (of ``wheel_torque``), wheel_ripple
+    and external.  Torques are evaluated at each sample, the start of its step.
     """
 
     t_s: np.ndarray
@@ -103,6 +105,11 @@ class TruthModel:
         self.n_wheels = n_wheels
         self.chunk = chunk
         self.function, self.backend = compile_function(build_chunk(n_wheels, chunk), backend)
+        self.tail_chunk = min(TAIL_CHUNK, chunk)
+        # The tail function always uses the backend the main one ended up with, so a
+        # run never mixes compiled and VM arithmetic.
+        self.tail_function, _ = compile_function(build_chunk(n_wheels, self.tail_chunk),
+                                                 self.backend)
 
     def rollout(self, x0: np.ndarray, inputs: dict[str, np.ndarray], p: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
@@ -112,33 +119,43 @@ class TruthModel:
         layout = input_layout(self.n_wheels)
         arrays = [np.ascontiguousarray(inputs[name], dtype=float).reshape(-1, k)
                   for name, k in layout]
-        n_steps, nx, c = arrays[0].shape[0], x0.size, self.chunk
+        n_steps, nx = arrays[0].shape[0], x0.size
         states = np.empty((n_steps + 1, nx))
         states[0] = x0
         aux = np.empty((n_steps, n_aux(self.n_wheels)))
         p = np.ascontiguousarray(p, dtype=float)
-        buf, run = self.function.buffer()
-        for start in range(0, n_steps, c):
-            stop = min(start + c, n_steps)
+        n_main = n_steps - n_steps % self.chunk
+        self._run(self.function, self.chunk, 0, n_main, states, aux, arrays, p)
+        self._run(self.tail_function, self.tail_chunk, n_main, n_steps, states, aux, arrays, p)
+        return states, aux
+
+    @staticmethod
+    def _run(function, c, begin, end, states, aux, arrays, p) -> None:
+        buf, run = function.buffer()
+        nx = states.shape[1]
+        for start in range(begin, end, c):
+            stop = min(start + c, end)
             full = stop - start == c
             blocks = [a[start:stop] if full else _pad(a[start:stop], c) for a in arrays]
             x_out = states[start + 1:stop + 1] if full else np.empty((c, nx))
             a_out = aux[start:stop] if full else np.empty((c, aux.shape[1]))
             x_in = states[start].copy()
-            # The buffer keeps raw pointers: every array must stay alive until run().
+            # The buffer keeps raw pointers: every array must stay alive until run(),
+            # and outputs must be views into states/aux, not silent copies.
+            x_flat, a_flat = x_out.reshape(-1), a_out.reshape(-1)
+            assert np.shares_memory(x_flat, x_out) and np.shares_memory(a_flat, a_out)
             buf.set_arg(0, memoryview(x_in))
             for i, blk in enumerate(blocks, start=1):
                 buf.set_arg(i, memoryview(blk.reshape(-1)))
             buf.set_arg(len(blocks) + 1, memoryview(p))
-            buf.set_res(0, memoryview(x_out.reshape(-1)))
-            buf.set_res(1, memoryview(a_out.reshape(-1)))
+            buf.set_res(0, memoryview(x_flat))
+            buf.set_res(1, memoryview(a_flat))
             run()
             if buf.ret() != 0:
                 raise RuntimeError(f"truth rollout failed in chunk starting at step {start}")
             if not full:
                 states[start + 1:stop + 1] = x_out[:stop - start]
                 aux[start:stop] = a_out[:stop - start]
-        return states, aux
 
 
 def _pad(block: np.ndarray, rows: int) -> np.ndarray:
@@ -156,32 +173,48 @@ def truth_model(n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str = "auto"
 
 
 def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environment,
-                ripple: np.ndarray, extra_torque: np.ndarray | None
+                ripple: np.ndarray, extra_torque: np.ndarray | None = None,
+                wheel_torque: np.ndarray | None = None
                 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Per-step inputs of ``step.input_layout`` on the output grid, and the shadow."""
-    n = len(t_s)
+    n, n_wheels = len(t_s), ripple.shape[1]
     jd0 = ephemeris.julian_date(epoch)
     alpha = orbit.right_ascension(t_s, ephemeris.gmst_rad(jd0))
-    ca_, sa = np.cos(alpha), np.sin(alpha)
+    cos_a, sin_a = np.cos(alpha), np.sin(alpha)
     sun_n, sun_dist = _sun_on_grid(t_s, jd0)
-    # ŝ_R = C_RN ŝ_N with the closed-form equatorial orbit frame (GeoOrbit.orbit_frame).
+    # Satellite-to-Sun direction in the orbit frame.  With the closed-form frame of
+    # GeoOrbit.orbit_frame, C_RN ŝ_N is below; the satellite sits at −R ẑ_R, so
+    # d ŝ − r adds R to the z component (a parallax of up to R/AU = 0.016°).
     sun_r = np.empty((n, 3))
-    sun_r[:, 0] = -sa * sun_n[:, 0] + ca_ * sun_n[:, 1]
-    sun_r[:, 1] = -sun_n[:, 2]
-    sun_r[:, 2] = -ca_ * sun_n[:, 0] - sa * sun_n[:, 1]
-    shadow = _shadow_on_grid(orbit.radius_m * np.stack([ca_, sa, np.zeros(n)], axis=-1),
+    sun_r[:, 0] = sun_dist * (-sin_a * sun_n[:, 0] + cos_a * sun_n[:, 1])
+    sun_r[:, 1] = sun_dist * -sun_n[:, 2]
+    sun_r[:, 2] = sun_dist * (-cos_a * sun_n[:, 0] - sin_a * sun_n[:, 1]) + orbit.radius_m
+    sat_sun_dist = np.sqrt(np.einsum("ij,ij->i", sun_r, sun_r))
+    sun_r /= sat_sun_dist[:, None]
+    shadow = _shadow_on_grid(orbit.radius_m * np.stack([cos_a, sin_a, np.zeros(n)], axis=-1),
                              sun_n, sun_dist, env.shadow_model)
     mag = env.magnetic
     if mag.enabled and np.any(mag.profile_amplitude_Am2):
         m_prof = mag.profile(t_s)
     else:
         m_prof = np.zeros((n, 3))
-    n_ext = np.zeros((n, 3)) if extra_torque is None else np.asarray(extra_torque, float)
-    if n_ext.shape != (n, 3):
-        raise ValueError(f"extra torque must have shape ({n}, 3)")
-    inputs = {"sun_r": sun_r, "sun_scale": shadow * (AU_M / sun_dist) ** 2,
-              "m_prof": m_prof, "n_ext": n_ext, "ripple": ripple}
+    inputs = {"sun_r": sun_r, "sun_scale": shadow * (ephemeris.AU_M / sat_sun_dist) ** 2,
+              "m_prof": m_prof,
+              "n_ext": _checked(extra_torque, (n, 3), "extra torque"),
+              "u_wheel": _checked(wheel_torque, (n, n_wheels), "wheel torque"),
+              "ripple": ripple}
     return inputs, shadow
+
+
+def _checked(a: np.ndarray | None, shape: tuple[int, int], name: str) -> np.ndarray:
+    if a is None:
+        return np.zeros(shape)
+    a = np.asarray(a, dtype=float)
+    if a.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} contains NaN or infinity")
+    return a
 
 
 def _shadow_on_grid(r_sat: np.ndarray, sun_n: np.ndarray, sun_dist: np.ndarray, model: str,
@@ -234,11 +267,15 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
                    duration_s: float, dt_s: float = 0.512,
                    rng: np.random.Generator | None = None,
                    extra_torque: np.ndarray | None = None,
+                   wheel_torque: np.ndarray | None = None,
                    model: TruthModel | None = None) -> TruthResult:
     """Simulate the nonlinear truth on ``t = 0, dt, …`` up to ``duration_s``.
 
     ``rng`` supplies the wheel ripple; it is required when ripple is enabled so
-    that every random draw traces back to the scenario seed.
+    that every random draw traces back to the scenario seed.  ``extra_torque``
+    (N, 3) adds a body torque and ``wheel_torque`` (N, n_wheels) adds motor torques
+    to the control's, each held over its step.  ``final_state`` is the state one
+    step after the last sample (the step that produced the last sample's outputs).
     """
     if not (np.isfinite(duration_s) and duration_s >= 0):
         raise ValueError("duration_s must be finite and non-negative")
@@ -254,7 +291,8 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
         ripple = sigma * rng.standard_normal((n_samples, n))
     else:
         ripple = np.zeros((n_samples, n))
-    inputs, shadow = step_inputs(t_s, epoch, orbit, environment, ripple, extra_torque)
+    inputs, shadow = step_inputs(t_s, epoch, orbit, environment, ripple, extra_torque,
+                                 wheel_torque)
     p = pack_params(spacecraft, orbit, environment, control, dt_s)
     model = model or truth_model(n, DEFAULT_CHUNK, requested_backend())
     # One step per output sample: the last step's end state is kept as final_state.
@@ -271,7 +309,9 @@ def _result(t_s, states, aux, inputs, shadow, spacecraft, backend) -> TruthResul
         "gravity_gradient": a["t_gg"],
         "solar": a["t_solar"],
         "magnetic": a["t_mag"],
+        "magnetic_control": a["t_mtq"],
         "wheel_control": -a["u_cmd"] @ axes,
+        "wheel_input": -inputs["u_wheel"] @ axes,
         "wheel_ripple": -inputs["ripple"] @ axes,
         "external": inputs["n_ext"],
     }

@@ -76,3 +76,63 @@ def test_out_must_be_a_directory(tmp_path):
     f.write_text("x")
     with pytest.raises(RunDirError), staged_run_dir(f):
         pass
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--seed", "-1"], "--seed"),
+    (["--seed", "1.5"], "--seed"),
+    (["--duration-s", "1e15"], "--duration-s"),
+    (["--duration-s", "-3"], "--duration-s"),
+    (["--epoch", "2150-01-01T00:00:00Z"], "--epoch"),
+    (["--epoch", "2026-13-01T00:00:00Z"], "--epoch"),
+    (["--bogus", "1"], "unrecognized"),
+])
+def test_bad_arguments_are_one_line_exit_2(tmp_path, capsys, argv, fragment):
+    out = tmp_path / "x"
+    try:
+        code = main(["truth", "--out", str(out), *argv])
+    except SystemExit as exc:  # argparse's own errors
+        code = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and fragment in err[0], err
+    assert not out.exists()
+
+
+def test_out_under_a_file_is_refused_before_simulating(tmp_path, capsys):
+    (tmp_path / "afile").write_text("x")
+    assert main(["truth", "--out", str(tmp_path / "afile" / "sub")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a directory" in err[0]
+
+
+def test_run_json_records_seed_epoch_backend(tmp_path):
+    import json
+    out = tmp_path / "run"
+    assert main(["truth", "--duration-s", "10", "--seed", "9", "--out", str(out)]) == 0
+    info = json.loads((out / "run.json").read_text())
+    assert info["seed"] == 9 and info["backend"] in ("compiled", "vm")
+    assert info["epoch_utc"] == "2026-03-20T12:00:00Z" and info["dynprop_version"]
+
+
+def test_swap_failure_restores_previous_run(tmp_path, monkeypatch):
+    import os
+
+    from scenarios import rundir
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "truth.csv").write_text("old")
+    real_replace = os.replace
+    calls = []
+
+    def flaky_replace(src, dst):
+        calls.append((src, dst))
+        if len(calls) == 2:  # the new run moving into place
+            raise OSError(28, "No space left on device")
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(rundir.os, "replace", flaky_replace)
+    with pytest.raises(OSError), staged_run_dir(out, force=True) as stage:
+        (stage / "truth.csv").write_text("new")
+    assert (out / "truth.csv").read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]
