@@ -12,6 +12,7 @@ import statistics
 import sys
 import tempfile
 import time
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +24,9 @@ from sim.environment import Environment  # noqa: E402
 from sim.frames import GeoOrbit  # noqa: E402
 from sim.spacecraft import goes_next  # noqa: E402
 from sim.truth import InitialState, TruthModel, simulate_truth  # noqa: E402
-from tests.sim.conftest import EQUINOX  # noqa: E402
 
 DAY = 86400.0
+EQUINOX = datetime(2026, 3, 20, 12, 0, 0, tzinfo=UTC)
 
 
 def report(name: str, value: float, unit: str) -> None:

@@ -14,6 +14,23 @@ class RunDirError(ValueError):
     """The output directory cannot be used (exists and is not empty, no --force)."""
 
 
+def check_out_dir(out: Path | str, force: bool = False) -> Path:
+    """Refuse an unusable ``--out`` before any work is done."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise RunDirError(f"--out {out}: exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise RunDirError(f"--out {out}: directory exists and is not empty (use --force)")
+    for parent in out.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise RunDirError(f"--out {out}: {parent} is not a directory")
+            if not os.access(parent, os.W_OK):
+                raise RunDirError(f"--out {out}: {parent} is not writable")
+            break
+    return out
+
+
 @contextlib.contextmanager
 def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
     """Yield a temporary sibling directory; on success it replaces ``out``.
@@ -22,11 +39,7 @@ def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
     while writing, ``out`` is left exactly as it was and the staging directory
     is removed.
     """
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise RunDirError(f"--out {out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not force:
-        raise RunDirError(f"--out {out}: directory exists and is not empty (use --force)")
+    out = check_out_dir(out, force)
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     # mkdtemp makes 0700; give the finished directory the user's usual permissions.
@@ -39,10 +52,17 @@ def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
         shutil.rmtree(stage, ignore_errors=True)
         raise
     backup = None
-    if out.exists():
-        backup = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
-        os.rmdir(backup)
-        os.replace(out, backup)
-    os.replace(stage, out)
+    try:
+        if out.exists():
+            backup = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
+            os.rmdir(backup)
+            os.replace(out, backup)
+        os.replace(stage, out)
+    except BaseException:
+        # Put the previous run back where it was; drop the new one.
+        if backup is not None and backup.exists() and not out.exists():
+            os.replace(backup, out)
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
     if backup is not None:
         shutil.rmtree(backup, ignore_errors=True)

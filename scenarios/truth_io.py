@@ -13,8 +13,10 @@ RADPS2RPM = 60.0 / (2.0 * np.pi)
 def truth_columns(result) -> dict[str, np.ndarray]:
     """Named output columns, degrees and rpm only here at the I/O boundary.
 
-    ``w{x,y,z}_radps`` is the inertial angular velocity in body axes (what a gyro
-    would read).  Torque columns are ``<source>_{x,y,z}_Nm`` in body axes.
+    ``w{x,y,z}_radps`` is ω_BN, the inertial angular velocity in body axes (what a
+    gyro would read); ``wrel{x,y,z}_radps`` is ω_BR, relative to the orbit frame.
+    Torque columns are ``<source>_{x,y,z}_Nm`` in body axes; ``wheel<i>_cmd_Nm`` is
+    the control's motor torque and ``torquer_{x,y,z}_Am2`` the torquer dipole.
     """
     cols = {
         "t_s": result.t_s,
@@ -24,6 +26,9 @@ def truth_columns(result) -> dict[str, np.ndarray]:
         "wx_radps": result.w_bn_radps[:, 0],
         "wy_radps": result.w_bn_radps[:, 1],
         "wz_radps": result.w_bn_radps[:, 2],
+        "wrelx_radps": result.w_br_radps[:, 0],
+        "wrely_radps": result.w_br_radps[:, 1],
+        "wrelz_radps": result.w_br_radps[:, 2],
     }
     for i in range(result.wheel_speeds_radps.shape[1]):
         cols[f"wheel{i + 1}_rpm"] = result.wheel_speeds_radps[:, i] * RADPS2RPM
@@ -31,6 +36,10 @@ def truth_columns(result) -> dict[str, np.ndarray]:
     cols["H_Nms"] = result.H_Nms
     cols["eclipse"] = result.eclipse.astype(float)
     cols["shadow"] = result.shadow
+    for i in range(result.wheel_command_Nm.shape[1]):
+        cols[f"wheel{i + 1}_cmd_Nm"] = result.wheel_command_Nm[:, i]
+    for k, axis in enumerate("xyz"):
+        cols[f"torquer_{axis}_Am2"] = result.torquer_dipole_Am2[:, k]
     for name, torque in result.torques.items():
         for k, axis in enumerate("xyz"):
             cols[f"{name}_{axis}_Nm"] = torque[:, k]
