@@ -21,7 +21,8 @@ test: $(STAMP)
 	PYTHONWARNINGS=error $(BIN)/python -m pytest
 
 demo: $(STAMP)
-	$(BIN)/dynprop truth --duration-s 172800 --out $(DEMO_DIR)
+	$(BIN)/dynprop simulate goes_next_equinox --out $(DEMO_DIR)
+	$(BIN)/dynprop plot $(DEMO_DIR)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py

@@ -12,7 +12,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def _shade(ax, t_h: np.ndarray, mask: np.ndarray, label: str | None) -> None:
+def shade_intervals(ax, t_h: np.ndarray, mask: np.ndarray, label: str | None) -> None:
+    """Grey bands over the intervals where ``mask`` is true."""
     if not np.any(mask):
         return
     edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
@@ -30,14 +31,14 @@ def plot_truth(t_s: np.ndarray, attitude_deg: dict[str, np.ndarray], h_Nms: np.n
     for name, series in attitude_deg.items():
         ax.plot(t_h, series, lw=0.8, label=name)
     ax.set_ylabel("attitude (deg)")
-    _shade(ax, t_h, eclipse, "eclipse")
+    shade_intervals(ax, t_h, eclipse, "eclipse")
     ax.legend(loc="upper right", ncol=4, fontsize=8)
     ax.grid(alpha=0.3)
 
     ax = axes[1]
     ax.plot(t_h, h_Nms, lw=0.8, color="C3")
     ax.set_ylabel("yaw wheel momentum h (N m s)")
-    _shade(ax, t_h, eclipse, None)
+    shade_intervals(ax, t_h, eclipse, None)
     ax.grid(alpha=0.3)
 
     ax = axes[2]
@@ -54,7 +55,7 @@ def plot_truth(t_s: np.ndarray, attitude_deg: dict[str, np.ndarray], h_Nms: np.n
             ax.semilogy(t_h, np.where(mag > 0, mag, np.nan), lw=0.8, label=name)
     ax.set_ylabel(f"|torque|, {mean_window_s / 60:g}-min mean (N m)")
     ax.set_xlabel("time (h)")
-    _shade(ax, t_h, eclipse, None)
+    shade_intervals(ax, t_h, eclipse, None)
     ax.legend(loc="upper right", ncol=3, fontsize=8)
     ax.grid(alpha=0.3, which="both")
     fig.suptitle(title)

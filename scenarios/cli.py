@@ -1,24 +1,17 @@
 """The ``dynprop`` command line (DESIGN.md section 6).
 
-Exit status: 0 on success, 2 for bad input (one line naming the problem, no
-traceback), 1 for an internal error.
+Exit status: 0 on success, 2 for bad input (one line naming the key or argument,
+no traceback, no directory written), 1 for an internal error (one line;
+``DYNPROP_DEBUG=1`` shows the traceback), 130 when interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
-
-import numpy as np
-
-from . import __version__
-
-# A truth day holds ~70 MB of arrays; 30 days stays well inside this machine class.
-MAX_DURATION_S = 30 * 86400.0
 
 
 class InputError(ValueError):
@@ -32,109 +25,99 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"dynprop: error: {message}\n")
 
 
-def _duration(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (np.isfinite(value) and 0 <= value <= MAX_DURATION_S):
-        raise argparse.ArgumentTypeError(
-            f"must be between 0 and {MAX_DURATION_S:.0f} s, got {text!r}")
-    return value
-
-
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {text!r}")
-    return value
+def _scenario_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenario", metavar="SCENARIO", help="a YAML path or a bundled name")
+    p.add_argument("--seed", help="override the scenario seed")
+    p.add_argument("--duration-s", help="override the scenario duration")
+    p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override any scenario key (repeatable); VALUE is YAML")
 
 
 def _build_parser() -> argparse.ArgumentParser:
+    from . import __version__
     parser = _Parser(
         prog="dynprop",
         description="Dynamic attitude propagation for momentum-biased Earth-pointing "
                     "spacecraft (GOES-Next): nonlinear truth vs the paper's linear filter.")
     parser.add_argument("--version", action="version", version=f"dynprop {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    truth = sub.add_parser(
-        "truth", help="simulate the nonlinear truth with GOES-Next defaults; write CSV + plot")
-    truth.add_argument("--out", required=True, type=Path, help="new run directory")
-    truth.add_argument("--duration-s", type=_duration, default=86400.0)
-    truth.add_argument("--seed", type=_seed, default=20260320)
-    truth.add_argument("--epoch", default="2026-03-20T12:00:00Z", help="UTC, ISO 8601")
-    truth.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    sim = sub.add_parser("simulate", help="truth + telemetry: scenario.yaml, truth.csv, "
+                         "telemetry.csv")
+    _scenario_args(sim)
+    sim.add_argument("--out", required=True, type=Path, help="new run directory")
+    sim.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    sub.add_parser("scenarios", help="list the bundled scenarios")
+    plot = sub.add_parser("plot", help="(re)draw the figures of a run directory")
+    plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser
 
 
-def _cmd_truth(args) -> int:
-    from plots.truth import plot_truth
-    from sim import ephemeris
-    from sim.control import Control
-    from sim.environment import Environment
-    from sim.frames import GeoOrbit
-    from sim.spacecraft import goes_next
-    from sim.truth import InitialState, simulate_truth
+def load_with_overrides(args):
+    """The scenario with --set, --seed and --duration-s applied (validated together)."""
+    from .loader import load_scenario
+    overrides = list(args.set)
+    if args.seed is not None:
+        overrides.append(f"seed={args.seed}")
+    if args.duration_s is not None:
+        overrides.append(f"duration_s={args.duration_s}")
+    return load_scenario(args.scenario, overrides)
 
-    from . import __version__
+
+def _cmd_simulate(args) -> int:
     from .rundir import check_out_dir, staged_run_dir
-    from .truth_io import RAD2DEG, write_truth_csv
+    from .runner import simulate, write_simulation
 
-    try:
-        epoch = ephemeris.parse_epoch(args.epoch)
-    except ValueError as exc:
-        raise InputError(f"--epoch: {exc}") from None
-    if not 1950 <= epoch.year < 2050:
-        raise InputError(f"--epoch: {args.epoch} is outside 1950-2049, where the solar "
-                         "ephemeris holds 0.01 deg")
+    scenario = load_with_overrides(args)
     check_out_dir(args.out, args.force)
-    rng = np.random.default_rng(np.random.SeedSequence(args.seed))
-    init = InitialState(yaw_rad=np.deg2rad(0.05), roll_rad=np.deg2rad(0.02))
     start = time.perf_counter()
-    res = simulate_truth(goes_next(), GeoOrbit(), Environment(), Control(), init, epoch,
-                         args.duration_s, rng=rng)
-    elapsed = time.perf_counter() - start
+    result = simulate(scenario)
     with staged_run_dir(args.out, force=args.force) as stage:
-        write_truth_csv(stage / "truth.csv", res)
-        (stage / "plots").mkdir()
-        fig = plot_truth(
-            res.t_s,
-            {"yaw": res.yaw_rad * RAD2DEG, "roll": res.roll_rad * RAD2DEG,
-             "pitch": res.pitch_rad * RAD2DEG},
-            res.h_Nms,
-            {k: res.torques[k] for k in ("gravity_gradient", "solar", "magnetic",
-                                         "magnetic_control", "wheel_control")},
-            res.eclipse,
-            f"GOES-Next truth, epoch {args.epoch}, seed {args.seed}")
-        fig.savefig(stage / "plots" / "truth.png", dpi=120)
-        run_info = {"dynprop_version": __version__, "command": "truth", "seed": args.seed,
-                    "epoch_utc": args.epoch, "duration_s": args.duration_s,
-                    "sample_interval_s": 0.512, "backend": res.backend}
-        (stage / "run.json").write_text(json.dumps(run_info, indent=2) + "\n")
-    days = args.duration_s / 86400.0
-    print(f"simulated {days:.2f} d in {elapsed:.2f} s ({res.backend}); "
-          f"wrote {args.out}/truth.csv and {args.out}/plots/truth.png")
+        write_simulation(stage, result)
+    days = scenario.duration_s / 86400.0
+    tel = result.telemetry
+    print(f"{scenario.name}: {days:.2f} d simulated and written in "
+          f"{time.perf_counter() - start:.1f} s ({result.truth.backend}); "
+          f"Sun-sensor yaw on {100 * (tel.yaw_head >= 0).mean():.0f}% of samples; "
+          f"wrote {args.out}/{{scenario.yaml,truth.csv,telemetry.csv}}")
     return 0
 
 
-COMMANDS = {"truth": _cmd_truth}
+def _cmd_scenarios(args) -> int:
+    from .loader import bundled_names, load_scenario
+    names = bundled_names()
+    width = max(map(len, names))
+    for name in names:
+        print(f"{name:<{width}}  {load_scenario(name).description}")
+    return 0
+
+
+def _cmd_plot(args) -> int:
+    from .plotting import plot_run
+    written = plot_run(args.run_dir)
+    for path in written:
+        print(path)
+    return 0
+
+
+COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd_plot}
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
+    from .loader import ScenarioError
     from .rundir import RunDirError
     try:
         return COMMANDS[args.command](args)
-    except (InputError, RunDirError) as exc:
+    except (InputError, RunDirError, ScenarioError) as exc:
         print(f"dynprop: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
-        # Files the user named (or their directories) could not be written or read.
+        # Files the user named (or their directories) could not be read or written.
         print(f"dynprop: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("dynprop: interrupted; nothing was written", file=sys.stderr)
+        return 130
     except Exception as exc:
         if os.environ.get("DYNPROP_DEBUG"):
             raise

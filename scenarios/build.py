@@ -1,0 +1,84 @@
+"""Turn a validated scenario into the simulator's parameter objects and seeds."""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+import numpy as np
+
+from sim import control, environment, ephemeris, sensors, spacecraft
+from sim.frames import GeoOrbit
+from sim.truth import InitialState
+
+from .schema import Scenario, SunHead
+
+DEG = np.pi / 180.0
+
+# Every random stream of a run, in a fixed order: stream i of run k is seeded by
+# SeedSequence(seed, spawn_key=(k, i)), exactly what SeedSequence(seed).spawn()
+# would give, but independent of which sensors a scenario configures, so that
+# changing one sensor never moves another's noise.
+STREAMS = ("ripple", "earth", "tachometer", "dss", "cass1", "cass2")
+
+
+def streams(seed: int, run: int = 0) -> dict[str, np.random.Generator]:
+    return {name: np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, i)))
+            for i, name in enumerate(STREAMS)}
+
+
+def epoch(s: Scenario) -> datetime:
+    return ephemeris.parse_epoch(s.epoch_utc)
+
+
+def orbit(s: Scenario) -> GeoOrbit:
+    return GeoOrbit(longitude_rad=s.orbit.longitude_deg * DEG, radius_m=s.orbit.radius_m)
+
+
+def build_spacecraft(s: Scenario) -> spacecraft.Spacecraft:
+    sc, w = s.spacecraft, s.spacecraft.wheels
+    if sc.configuration == "backup":
+        return spacecraft.goes_next_backup(sc.inertia_kgm2, w.spin_inertia_kgm2, w.cant_deg,
+                                           w.speed_rpm, sc.yaw_wheel.spin_inertia_kgm2)
+    return spacecraft.goes_next(sc.inertia_kgm2, spin_inertia_kgm2=w.spin_inertia_kgm2,
+                                cant_deg=w.cant_deg, speed_rpm=w.speed_rpm)
+
+
+def build_environment(s: Scenario) -> environment.Environment:
+    e = s.environment
+    return environment.Environment(
+        environment.GravityGradient(e.gravity_gradient.enabled),
+        environment.SolarTorque(e.solar.enabled, e.solar.untrimmed_torque_Nm,
+                                e.solar.tab_effectiveness_Nm_per_deg, e.solar.trim_tab_deg,
+                                e.solar.lever_axis),
+        environment.MagneticTorque(e.magnetic.enabled, e.magnetic.residual_dipole_Am2,
+                                   e.magnetic.profile_amplitude_Am2,
+                                   e.magnetic.profile_period_s,
+                                   e.magnetic.profile_phase_deg * DEG),
+        # The noise switch turns off every random draw, the ripple included.
+        environment.WheelRipple(e.ripple.enabled and s.sensors.noise.enabled,
+                                e.ripple.psd_Nm2_per_Hz),
+        e.shadow_model)
+
+
+def build_control(s: Scenario) -> control.Control:
+    return control.Control(**s.control.model_dump())
+
+
+def build_initial(s: Scenario) -> InitialState:
+    i = s.initial_state
+    return InitialState(i.yaw_deg * DEG, i.roll_deg * DEG, i.pitch_deg * DEG,
+                        tuple(np.asarray(i.rate_wrt_orbit_degps) * DEG))
+
+
+def _head(name: str, h: SunHead) -> sensors.SunSensorHead:
+    return sensors.SunSensorHead(name, h.kind, h.boresight_hour_angle_deg, h.fov_in_plane_deg,
+                                 h.fov_out_of_plane_deg, h.quantum_deg, h.noise_deg)
+
+
+def build_sensors(s: Scenario) -> sensors.SensorSuite:
+    c = s.sensors
+    return sensors.SensorSuite(
+        sensors.EarthSensor(c.earth.noise_deg, c.earth.quantum_deg),
+        (_head("dss", c.sun.dss), _head("cass1", c.sun.cass1), _head("cass2", c.sun.cass2)),
+        sensors.Tachometer(c.tachometer.quantum_rpm, c.tachometer.noise_3sigma_rpm),
+        c.noise.enabled)

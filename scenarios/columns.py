@@ -1,0 +1,66 @@
+"""Column definitions of truth.csv and telemetry.csv (DESIGN.md section 6).
+
+Degrees and rpm appear only here, at the I/O boundary, with the unit in each
+column name.  Missing values are NaN and are written as empty fields.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+RAD2DEG = 180.0 / np.pi
+RADPS2RPM = 60.0 / (2.0 * np.pi)
+
+TELEMETRY_REQUIRED = ("t_s", "roll_deg", "pitch_deg", "yaw_deg", "wheel1_rpm", "wheel2_rpm")
+
+
+def truth_columns(result, sun_visible: np.ndarray) -> dict[str, np.ndarray]:
+    """``w{x,y,z}_radps`` is ω_BN in body axes (what a gyro reads).  ``sun_visible`` is
+    1 when any Sun-sensor head has the Sun in its field of view (geometry and
+    eclipse, not noise); ``shadow`` is the visible fraction of the solar disc.
+    Torques are ``<source>_{x,y,z}_Nm``, body axes, at each sample."""
+    cols = {
+        "t_s": result.t_s,
+        "yaw_deg": result.yaw_rad * RAD2DEG,
+        "roll_deg": result.roll_rad * RAD2DEG,
+        "pitch_deg": result.pitch_rad * RAD2DEG,
+        "wx_radps": result.w_bn_radps[:, 0],
+        "wy_radps": result.w_bn_radps[:, 1],
+        "wz_radps": result.w_bn_radps[:, 2],
+    }
+    for i in range(result.wheel_speeds_radps.shape[1]):
+        cols[f"wheel{i + 1}_rpm"] = result.wheel_speeds_radps[:, i] * RADPS2RPM
+    cols["h_Nms"] = result.h_Nms
+    cols["H_Nms"] = result.H_Nms
+    cols["sun_visible"] = np.asarray(sun_visible, dtype=float)
+    cols["eclipse"] = result.eclipse.astype(float)
+    cols["shadow"] = result.shadow
+    for name, torque in result.torques.items():
+        for k, axis in enumerate("xyz"):
+            cols[f"{name}_{axis}_Nm"] = torque[:, k]
+    return cols
+
+
+def telemetry_columns(tel, head_names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """What a ground system receives, plus its own yaw solution.
+
+    ``yaw_deg`` is the ground yaw (empty when no Sun sensor sees the Sun or the Sun
+    is too near the yaw axis); ``yaw_sigma_deg`` its a-priori 1σ from the sensor and
+    the geometry; ``sun_head`` the index of the head it came from (0 = first head);
+    ``<head>_{alpha,beta}_deg`` the raw quantised Sun-sensor angles (empty when that
+    head does not see the Sun).
+    """
+    cols = {
+        "t_s": tel.t_s,
+        "roll_deg": tel.roll_rad * RAD2DEG,
+        "pitch_deg": tel.pitch_rad * RAD2DEG,
+        "yaw_deg": tel.yaw_rad * RAD2DEG,
+    }
+    for i in range(tel.wheel_speeds_radps.shape[1]):
+        cols[f"wheel{i + 1}_rpm"] = tel.wheel_speeds_radps[:, i] * RADPS2RPM
+    cols["yaw_sigma_deg"] = tel.yaw_sigma_rad * RAD2DEG
+    cols["sun_head"] = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
+    for k, name in enumerate(head_names):
+        cols[f"{name}_alpha_deg"] = tel.sun.alpha_rad[:, k] * RAD2DEG
+        cols[f"{name}_beta_deg"] = tel.sun.beta_rad[:, k] * RAD2DEG
+    return cols

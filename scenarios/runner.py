@@ -1,0 +1,64 @@
+"""Run a scenario: truth, then telemetry; write the run directory.
+
+This is where ``sim`` meets the scenario; the estimator joins in a later issue.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from sim.telemetry import Telemetry, make_telemetry
+from sim.truth import TruthResult, simulate_truth
+
+from . import build
+from .columns import telemetry_columns, truth_columns
+from .csvio import write_csv
+from .loader import resolved_yaml
+from .schema import Scenario
+
+
+@dataclass(frozen=True)
+class Simulation:
+    scenario: Scenario
+    truth: TruthResult
+    telemetry: Telemetry
+    head_names: tuple[str, ...]
+
+
+def simulate(scenario: Scenario, run: int = 0, model=None) -> Simulation:
+    """Truth and telemetry for one run; every random stream comes from
+    ``build.streams(scenario.seed, run)``."""
+    rngs = build.streams(scenario.seed, run)
+    suite = build.build_sensors(scenario)
+    truth = simulate_truth(
+        build.build_spacecraft(scenario), build.orbit(scenario),
+        build.build_environment(scenario), build.build_control(scenario),
+        build.build_initial(scenario), build.epoch(scenario), scenario.duration_s,
+        scenario.sample_interval_s, rng=rngs["ripple"], model=model)
+    tel = make_telemetry(truth, suite, rngs, scenario.sensors.sun.min_sun_separation_deg)
+    return Simulation(scenario, truth, tel, tuple(h.name for h in suite.sun_heads))
+
+
+def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = None) -> None:
+    """scenario.yaml (resolved), truth.csv and telemetry.csv into ``stage``."""
+    (stage / "scenario.yaml").write_text(resolved_yaml(sim.scenario))
+    truth = truth_columns(sim.truth, sim.telemetry.sun_visible)
+    tel = telemetry_columns(sim.telemetry, sim.head_names)
+    rows = len(sim.truth.t_s)
+    if show_progress is None:
+        # A bar only on a terminal, and only when writing takes more than a moment.
+        show_progress = sys.stderr.isatty() and rows > 50_000
+    bar = None
+    if show_progress:
+        from tqdm import tqdm
+        bar = tqdm(total=2 * rows, unit="row", unit_scale=True, desc="writing",
+                   leave=False, file=sys.stderr)
+    try:
+        update = bar.update if bar is not None else None
+        write_csv(stage / "truth.csv", truth, progress=update)
+        write_csv(stage / "telemetry.csv", tel, progress=update)
+    finally:
+        if bar is not None:
+            bar.close()

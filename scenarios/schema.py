@@ -1,0 +1,240 @@
+"""The scenario schema (DESIGN.md section 6): every key, its unit, its default.
+
+Defaults are GOES-Next's from the paper, so a scenario file only lists what it
+changes.  Models are strict: unknown keys, wrong types, NaN and infinity are
+errors, and each error carries its key path.  ``docs/scenario-reference.md`` is
+generated from these definitions (``python -m scenarios.reference``).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator
+
+from sim import ephemeris, spacecraft
+
+# Elements stay strict (an int is a float; a string or bool is not), while the
+# containers accept YAML lists.
+_Float = Annotated[float, Strict()]
+Vec3 = Annotated[tuple[_Float, _Float, _Float], Strict(False)]
+Matrix3 = Annotated[tuple[Vec3, Vec3, Vec3], Strict(False)]
+MAX_DURATION_S = 30 * 86400.0  # a truth day holds ~70 MB of arrays
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, frozen=True)
+
+
+class Wheels(_Section):
+    """The two canted momentum wheels (paper Section 2.3)."""
+
+    spin_inertia_kgm2: float = Field(spacecraft.GOES_NEXT_WHEEL_INERTIA_KGM2, gt=0,
+                                     description="spin-axis inertia of each wheel (kg m²)")
+    cant_deg: float = Field(spacecraft.GOES_NEXT_CANT_DEG, ge=0, lt=90,
+                            description="cant of each wheel axis from −y in the y–z plane (deg)")
+    speed_rpm: float = Field(spacecraft.GOES_NEXT_WHEEL_SPEED_RPM,
+                             description="nominal speed of each wheel, relative to the body (rpm)")
+
+    @field_validator("speed_rpm")
+    @classmethod
+    def _nonzero(cls, v: float) -> float:
+        if v == 0:
+            raise ValueError("must not be zero: a momentum-biased spacecraft needs wheel momentum")
+        return v
+
+
+class YawWheel(_Section):
+    """The backup yaw reaction wheel along +z (Section 2.3)."""
+
+    spin_inertia_kgm2: float = Field(spacecraft.GOES_NEXT_YAW_WHEEL_INERTIA_KGM2, gt=0,
+                                     description="spin inertia (kg m²); its speed cancels h")
+
+
+class Spacecraft(_Section):
+    configuration: Literal["nominal", "backup"] = Field(
+        "nominal", description="'nominal': two momentum wheels; 'backup': one momentum wheel "
+        "plus the yaw reaction wheel")
+    inertia_kgm2: Matrix3 = Field(
+        spacecraft.GOES_NEXT_INERTIA_KGM2,
+        description="locked-wheel inertia tensor, body axes (kg m²); off-diagonals are "
+        "tensor elements (minus the products of inertia)")
+    wheels: Wheels = Field(default_factory=Wheels)
+    yaw_wheel: YawWheel = Field(default_factory=YawWheel)
+
+    @field_validator("inertia_kgm2")
+    @classmethod
+    def _physical(cls, v):
+        spacecraft.check_inertia(np.asarray(v), "inertia")
+        return v
+
+
+class Orbit(_Section):
+    longitude_deg: float = Field(-75.0, ge=-180, le=360,
+                                 description="east longitude of the geostationary slot (deg)")
+    radius_m: float = Field(42_164_170.0, gt=6.6e6, description="orbit radius (m)")
+
+
+class InitialState(_Section):
+    yaw_deg: float = Field(0.0, ge=-180, le=180, description="3-1-2 yaw (deg)")
+    roll_deg: float = Field(0.0, gt=-90, lt=90, description="3-1-2 roll (deg)")
+    pitch_deg: float = Field(0.0, ge=-180, le=180, description="3-1-2 pitch (deg)")
+    rate_wrt_orbit_degps: Vec3 = Field((0.0, 0.0, 0.0),
+                                       description="ω_BR in body axes (deg/s)")
+
+
+class GravityGradient(_Section):
+    enabled: bool = Field(True, description="gravity-gradient torque, full inertia tensor")
+
+
+class Solar(_Section):
+    enabled: bool = Field(True, description="solar array/sail imbalance torque (off in eclipse)")
+    untrimmed_torque_Nm: float = Field(5e-5, description="imbalance κ with the tab at 0 (N m)")
+    tab_effectiveness_Nm_per_deg: float = Field(2.5e-6, description="dκ/d(tab) (N m/deg)")
+    trim_tab_deg: float = Field(19.6, description="trim tab setting (deg); residual κ = "
+                                "untrimmed − effectiveness · tab (default 1e-6 N m)")
+    lever_axis: Vec3 = Field((0.0, 1.0, 0.0),
+                             description="array-to-sail centre-of-pressure unit vector (body)")
+
+    @field_validator("lever_axis")
+    @classmethod
+    def _unit(cls, v):
+        if abs(np.linalg.norm(v) - 1) > 1e-9:
+            raise ValueError("must be a unit vector")
+        return v
+
+
+class Magnetic(_Section):
+    enabled: bool = Field(True, description="residual and prescribed dipole torques "
+                          "(the torquers are control and keep working)")
+    residual_dipole_Am2: Vec3 = Field((0.0, 8.0, 0.0), description="body-fixed dipole (A m²)")
+    profile_amplitude_Am2: Vec3 = Field((0.0, 0.0, 0.0),
+                                        description="prescribed control-dipole sine amplitude, "
+                                        "per body axis (A m²)")
+    profile_period_s: float = Field(86164.0905, gt=0, description="its period (s)")
+    profile_phase_deg: float = Field(0.0, description="its phase (deg)")
+
+
+class Ripple(_Section):
+    enabled: bool = Field(True, description="wheel torque ripple (random, per wheel)")
+    psd_Nm2_per_Hz: float = Field(6e-7, ge=0,
+                                  description="one-sided PSD G; step variance G/(2Δt) ((N m)²/Hz)")
+
+
+class Environment(_Section):
+    gravity_gradient: GravityGradient = Field(default_factory=GravityGradient)
+    solar: Solar = Field(default_factory=Solar)
+    magnetic: Magnetic = Field(default_factory=Magnetic)
+    ripple: Ripple = Field(default_factory=Ripple)
+    shadow_model: Literal["conical", "cylindrical"] = Field("conical",
+                                                            description="Earth shadow model")
+
+
+class Control(_Section):
+    enabled: bool = Field(True, description="all attitude control")
+    pitch_loop: bool = Field(True, description="pitch PD loop on the common wheel torque")
+    roll_yaw_loop: bool = Field(True, description="roll/yaw loop on the differential torque")
+    pitch_bandwidth_radps: float = Field(0.02, ge=0, description="pitch loop ω_p (rad/s)")
+    pitch_damping: float = Field(0.7, ge=0, description="pitch loop ζ (-)")
+    roll_gain_per_s: float = Field(0.01, description="k_r in ḣ = H(k_r φ + k_ṙ φ̇) + k_h h (1/s)")
+    roll_rate_gain: float = Field(1.8, description="k_ṙ (-)")
+    yaw_momentum_gain_per_s: float = Field(-0.01, description="k_h (1/s)")
+    magnetic_unloading: bool = Field(True, description="torquers unload h (m = B×T/|B|²)")
+    unloading_gain_per_s: float = Field(3e-4, ge=0, description="k_m in T_z = −k_m h (1/s)")
+    torquer_max_Am2: float = Field(10.0, ge=0, description="torquer saturation per axis (A m²)")
+
+
+class Noise(_Section):
+    enabled: bool = Field(True, description="false turns every random draw off (sensor noise "
+                          "and wheel ripple); quantisation stays")
+
+
+class EarthSensor(_Section):
+    noise_deg: float = Field(0.01, ge=0, description="roll and pitch noise, 1σ (deg)")
+    quantum_deg: float = Field(0.01, gt=0, description="roll and pitch quantisation (deg)")
+
+
+class SunHead(_Section):
+    kind: Literal["dss", "cass"] = Field(description="digital or coarse analog")
+    boresight_hour_angle_deg: float = Field(
+        description="Sun hour angle from local noon at which the Sun is on the boresight (deg)")
+    fov_in_plane_deg: float = Field(gt=0, lt=90, description="half field of view in the "
+                                    "body x–z plane (deg)")
+    fov_out_of_plane_deg: float = Field(gt=0, lt=90, description="half field of view out of "
+                                        "it (deg)")
+    quantum_deg: float = Field(gt=0, description="angle quantisation (deg)")
+    noise_deg: float = Field(ge=0, description="angle noise 1σ; CASS: on the boresight, "
+                             "growing as 1/cos(off-boresight) (deg)")
+
+
+def _head(kind, hour, fov_in, fov_out, quantum, noise):
+    return Field(default_factory=lambda: SunHead(
+        kind=kind, boresight_hour_angle_deg=hour, fov_in_plane_deg=fov_in,
+        fov_out_of_plane_deg=fov_out, quantum_deg=quantum, noise_deg=noise))
+
+
+class SunSensors(_Section):
+    dss: SunHead = _head("dss", 90.0, 32.0, 32.0, 0.125, 0.0042)
+    cass1: SunHead = _head("cass", -75.0, 45.0, 35.0, 0.039, 1.0)
+    cass2: SunHead = _head("cass", 15.0, 45.0, 35.0, 0.039, 1.0)
+    min_sun_separation_deg: float = Field(10.0, ge=0, lt=90, description="no ground yaw when "
+                                          "the Sun is closer than this to the yaw axis (deg)")
+
+
+class Tachometer(_Section):
+    quantum_rpm: float = Field(0.0163, gt=0, description="quantisation (rpm)")
+    noise_3sigma_rpm: float = Field(0.0978, ge=0, description="noise, 3σ (rpm)")
+
+
+class Sensors(_Section):
+    noise: Noise = Field(default_factory=Noise)
+    earth: EarthSensor = Field(default_factory=EarthSensor)
+    sun: SunSensors = Field(default_factory=SunSensors)
+    tachometer: Tachometer = Field(default_factory=Tachometer)
+
+
+class ProcessNoise(_Section):
+    """Spectral densities of Eqs. 34–35 (paper units)."""
+
+    q_x: float = Field(5.4e-7, ge=0, description="roll torque, Eq. 45 ((N m)² s)")
+    q_z: float = Field(5.4e-7, ge=0, description="yaw torque, Eq. 45 ((N m)² s)")
+    q_w: float = Field(5.0e-10, ge=0, description="wheel ripple on h, 2 sin²c · G/2; the "
+                       "paper prints 1.3e-10 (errata 6) ((N m)² s)")
+    q_px: float = Field(3e-18, ge=0, description="periodic roll torque random walk; not in "
+                        "the paper: ~5e-7 N m per day ((N m)²/s)")
+    q_pz: float = Field(3e-18, ge=0, description="periodic yaw torque random walk ((N m)²/s)")
+    q_cx: float = Field(3e-18, ge=0, description="constant roll torque random walk ((N m)²/s)")
+    q_cz: float = Field(3e-18, ge=0, description="constant yaw torque random walk ((N m)²/s)")
+
+
+class Estimator(_Section):
+    process_noise: ProcessNoise = Field(default_factory=ProcessNoise)
+
+
+class Scenario(_Section):
+    name: str = Field(min_length=1, description="short identifier (required)")
+    description: str = Field("", description="one line shown by `dynprop scenarios`")
+    dynprop_version: str | None = Field(None, description="written into resolved scenarios; "
+                                        "ignored on input")
+    seed: int = Field(20260320, ge=0, description="root of every random stream")
+    epoch_utc: str = Field("2026-03-20T12:00:00Z", description="ISO 8601 UTC start time; sets "
+                           "the Sun and so the season (1950–2049)")
+    duration_s: float = Field(172800.0, ge=0, le=MAX_DURATION_S, description="length (s)")
+    sample_interval_s: float = Field(0.512, gt=0, le=60, description="telemetry and "
+                                     "integration step (s)")
+    spacecraft: Spacecraft = Field(default_factory=Spacecraft)
+    orbit: Orbit = Field(default_factory=Orbit)
+    initial_state: InitialState = Field(default_factory=InitialState)
+    environment: Environment = Field(default_factory=Environment)
+    control: Control = Field(default_factory=Control)
+    sensors: Sensors = Field(default_factory=Sensors)
+    estimator: Estimator = Field(default_factory=Estimator)
+
+    @field_validator("epoch_utc")
+    @classmethod
+    def _epoch(cls, v: str) -> str:
+        epoch = ephemeris.parse_epoch(v)
+        if not 1950 <= epoch.year < 2050:
+            raise ValueError("must be in 1950–2049, where the solar ephemeris holds 0.01°")
+        return v

@@ -1,0 +1,171 @@
+"""Attitude sensors at the telemetry rate (paper Section 2.1 and 2.3).
+
+Each sensor draws from its own ``numpy.random.Generator``, so changing one
+sensor's settings never changes another's noise.  Every sensor draws its full
+(N, k) noise array whether or not it sees anything, which keeps each stream's
+use independent of the trajectory.  With ``noise_enabled=False`` nothing is drawn
+and only quantisation remains.
+
+Sun-sensor geometry.  A head's boresight lies in the body x–z plane at the Sun
+hour angle ``boresight_hour_angle_deg`` θ_b, measured from local noon: with the
+body on the orbit frame, the Sun is at ŝ = (−sin θ, 0, −cos θ), overhead (−z) at
+noon, along −x at dusk, at nadir (+z) at midnight.  The head measures two angles
+of the Sun, α in that plane (towards increasing θ) and β out of it (along +y):
+α = atan2(ŝ·u, ŝ·b), β = atan2(ŝ·ŷ, ŝ·b), with u = (−cos θ_b, 0, sin θ_b).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+DEG = np.pi / 180.0
+RPM = 2.0 * np.pi / 60.0
+
+
+def quantize(x: np.ndarray, quantum: float) -> np.ndarray:
+    """Round to the nearest multiple of ``quantum`` (mid-tread quantiser)."""
+    return np.round(np.asarray(x) / quantum) * quantum
+
+
+@dataclass(frozen=True)
+class EarthSensor:
+    """Roll and pitch: 0.01° (1σ) noise and 0.01° quantisation (Section 2.1)."""
+
+    noise_deg: float = 0.01
+    quantum_deg: float = 0.01
+
+
+@dataclass(frozen=True)
+class SunSensorHead:
+    """One Sun-sensor head; ``kind`` is ``"dss"`` (digital) or ``"cass"`` (coarse analog).
+
+    Noise on each angle is ``noise_deg`` for a DSS.  For a CASS it is
+    ``noise_deg / cos(γ)``, γ the angle off the boresight: about 1° on the
+    boresight, growing away from it (Section 2.1 gives no more than that).
+    """
+
+    name: str
+    kind: str
+    boresight_hour_angle_deg: float
+    fov_in_plane_deg: float
+    fov_out_of_plane_deg: float
+    quantum_deg: float
+    noise_deg: float
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("dss", "cass"):
+            raise ValueError(f"sun sensor {self.name}: kind must be 'dss' or 'cass'")
+        for name in ("fov_in_plane_deg", "fov_out_of_plane_deg"):
+            if not 0 < getattr(self, name) < 90:
+                raise ValueError(f"sun sensor {self.name}: {name} must be in (0, 90)")
+        if not (self.quantum_deg > 0 and self.noise_deg >= 0):
+            raise ValueError(f"sun sensor {self.name}: quantum > 0 and noise >= 0 required")
+
+    @property
+    def axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Boresight b, in-plane axis u and out-of-plane axis ŷ, in body axes."""
+        t = self.boresight_hour_angle_deg * DEG
+        b = np.array([-np.sin(t), 0.0, -np.cos(t)])
+        u = np.array([-np.cos(t), 0.0, np.sin(t)])
+        return b, u, np.array([0.0, 1.0, 0.0])
+
+
+def goes_next_sun_sensors() -> tuple[SunSensorHead, ...]:
+    """Default heads: the DSS centred on dusk (it sees the Sun last before the
+    gap, Section 2.1) and two CASS heads covering the morning and early
+    afternoon.  Together they span hour angles −120°…+122°, leaving a 118° gap
+    (7.9 h) centred just after local midnight, about one third of the day.
+
+    DSS numbers are the paper's: 0.125° quantisation, 0.0042° noise.  They are not
+    consistent (the noise is far below the quantum, so it cannot dither it; the
+    effective error is the quantisation's 0.125/√12 = 0.036°), but they are the
+    only numbers given; docs/paper-errata.md records this.
+    """
+    return (
+        SunSensorHead("dss", "dss", 90.0, 32.0, 32.0, 0.125, 0.0042),
+        SunSensorHead("cass1", "cass", -75.0, 45.0, 35.0, 0.039, 1.0),
+        SunSensorHead("cass2", "cass", 15.0, 45.0, 35.0, 0.039, 1.0),
+    )
+
+
+@dataclass(frozen=True)
+class Tachometer:
+    """Wheel speed: 0.0163 rpm quantisation, 0.0978 rpm (3σ) noise (Section 2.3)."""
+
+    quantum_rpm: float = 0.0163
+    noise_3sigma_rpm: float = 0.0978
+
+
+@dataclass(frozen=True)
+class SensorSuite:
+    earth: EarthSensor = field(default_factory=EarthSensor)
+    sun_heads: tuple[SunSensorHead, ...] = field(default_factory=goes_next_sun_sensors)
+    tachometer: Tachometer = field(default_factory=Tachometer)
+    noise_enabled: bool = True
+
+    def stream_names(self) -> tuple[str, ...]:
+        """The random streams this suite uses, one per sensor."""
+        return ("earth", "tachometer", *(h.name for h in self.sun_heads))
+
+
+@dataclass(frozen=True)
+class SunReadings:
+    """Per head: visibility and the two quantised angles (rad; NaN when not visible)."""
+
+    visible: np.ndarray      # (N, n_heads) bool
+    alpha_rad: np.ndarray    # (N, n_heads)
+    beta_rad: np.ndarray     # (N, n_heads)
+
+
+def _noise(rng, shape, sigma, enabled: bool) -> np.ndarray:
+    if not enabled:
+        return np.zeros(shape)
+    return sigma * rng.standard_normal(shape)
+
+
+def earth_sensor(roll_rad, pitch_rad, spec: EarthSensor, rng, noise_enabled=True):
+    """Quantised, noisy roll and pitch (rad)."""
+    n = len(roll_rad)
+    e = _noise(rng, (n, 2), spec.noise_deg, noise_enabled)
+    q = spec.quantum_deg
+    return (quantize(np.asarray(roll_rad) / DEG + e[:, 0], q) * DEG,
+            quantize(np.asarray(pitch_rad) / DEG + e[:, 1], q) * DEG)
+
+
+def tachometers(speeds_radps, spec: Tachometer, rng, noise_enabled=True) -> np.ndarray:
+    """Quantised, noisy wheel speeds (rad/s), one column per wheel."""
+    speeds = np.asarray(speeds_radps)
+    e = _noise(rng, speeds.shape, spec.noise_3sigma_rpm / 3.0, noise_enabled)
+    return quantize(speeds / RPM + e, spec.quantum_rpm) * RPM
+
+
+def sun_sensors(sun_body: np.ndarray, lit: np.ndarray, heads, rngs, noise_enabled=True
+                ) -> SunReadings:
+    """Readings of every head from the true Sun direction in body axes.
+
+    A head sees the Sun when the Sun is in front of it, within both field-of-view
+    half angles, and not eclipsed (``lit``).
+    """
+    n = len(sun_body)
+    visible = np.zeros((n, len(heads)), dtype=bool)
+    alpha = np.full((n, len(heads)), np.nan)
+    beta = np.full((n, len(heads)), np.nan)
+    for k, head in enumerate(heads):
+        b, u, y = head.axes
+        sb, su, sy = sun_body @ b, sun_body @ u, sun_body @ y
+        a_true = np.arctan2(su, sb)
+        b_true = np.arctan2(sy, sb)
+        vis = (sb > 0) & (np.abs(a_true) <= head.fov_in_plane_deg * DEG) \
+            & (np.abs(b_true) <= head.fov_out_of_plane_deg * DEG) & lit
+        sigma = np.full(n, head.noise_deg)
+        if head.kind == "cass":
+            off_boresight = np.arccos(np.clip(sb, -1.0, 1.0))
+            sigma = head.noise_deg / np.maximum(np.cos(off_boresight), 1e-3)
+        e = _noise(rngs[head.name], (n, 2), 1.0, noise_enabled) * sigma[:, None]
+        q = head.quantum_deg
+        visible[:, k] = vis
+        alpha[vis, k] = quantize(a_true[vis] / DEG + e[vis, 0], q) * DEG
+        beta[vis, k] = quantize(b_true[vis] / DEG + e[vis, 1], q) * DEG
+    return SunReadings(visible, alpha, beta)

@@ -1,0 +1,106 @@
+"""Synthetic telemetry: sensor readings plus the ground system's yaw.
+
+Yaw is not a sensor output.  As on the ground, it is solved from the quantised
+Sun-sensor angles, the Earth sensor's roll and pitch, and the known Sun
+direction: with C_BR = R2(θ) R1(φ) R3(ψ), the measured Sun vector ŝ_B satisfies
+R1(φ)ᵀ R2(θ)ᵀ ŝ_B = R3(ψ) ŝ_R, so ψ is the angle between the x–y components of
+ŝ_R and of the de-rotated measurement.  Yaw is missing when no head sees the
+Sun, and when the Sun is within ``min_sun_separation_deg`` of the yaw axis,
+where that angle is undetermined (near noon and midnight at equinox).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .sensors import DEG, SensorSuite, SunReadings, earth_sensor, sun_sensors, tachometers
+
+
+@dataclass(frozen=True)
+class Telemetry:
+    """What the ground receives (SI units; NaN marks a missing yaw)."""
+
+    t_s: np.ndarray
+    roll_rad: np.ndarray
+    pitch_rad: np.ndarray
+    yaw_rad: np.ndarray
+    yaw_sigma_rad: np.ndarray   # a-priori 1σ of each yaw from sensor and geometry
+    yaw_head: np.ndarray        # index of the Sun-sensor head used, −1 when none
+    wheel_speeds_radps: np.ndarray
+    sun: SunReadings
+
+    @property
+    def sun_visible(self) -> np.ndarray:
+        return self.sun.visible.any(axis=1)
+
+
+def _angle_sigma_rad(head, alpha, beta) -> np.ndarray:
+    """1σ of one measured angle: noise (CASS: growing off boresight) and quantisation."""
+    noise = np.full(alpha.shape, head.noise_deg)
+    if head.kind == "cass":
+        cos_off = 1.0 / np.sqrt(1.0 + np.tan(alpha) ** 2 + np.tan(beta) ** 2)
+        noise = head.noise_deg / np.maximum(cos_off, 1e-3)
+    return np.sqrt(noise**2 + head.quantum_deg**2 / 12.0) * DEG
+
+
+def select_head(sun: SunReadings, heads) -> np.ndarray:
+    """Per sample, the head the ground uses: a visible DSS if any, else the visible
+    CASS whose measured Sun is closest to its boresight; −1 when none sees it."""
+    n, k = sun.visible.shape
+    rank = np.full((n, k), np.inf)
+    for j, head in enumerate(heads):
+        off = np.hypot(sun.alpha_rad[:, j], sun.beta_rad[:, j])
+        # DSS heads outrank every CASS (offsets are < π/2 rad).
+        rank[:, j] = np.where(sun.visible[:, j], off + (0.0 if head.kind == "dss" else 10.0),
+                              np.inf)
+    best = np.argmin(rank, axis=1)
+    return np.where(np.isfinite(rank[np.arange(n), best]), best, -1)
+
+
+def derive_yaw(sun: SunReadings, heads, roll_rad, pitch_rad, sun_orbit_frame,
+               min_sun_separation_deg: float = 10.0) -> tuple[np.ndarray, ...]:
+    """Ground yaw (rad), its a-priori σ (rad) and the head used, per sample."""
+    n = len(roll_rad)
+    head_idx = select_head(sun, heads)
+    s_meas = np.full((n, 3), np.nan)
+    sigma_angle = np.full(n, np.nan)
+    for j, head in enumerate(heads):
+        use = head_idx == j
+        if not np.any(use):
+            continue
+        b, u, y = head.axes
+        ta, tb = np.tan(sun.alpha_rad[use, j]), np.tan(sun.beta_rad[use, j])
+        v = b + ta[:, None] * u + tb[:, None] * y
+        s_meas[use] = v / np.linalg.norm(v, axis=1, keepdims=True)
+        sigma_angle[use] = _angle_sigma_rad(head, sun.alpha_rad[use, j], sun.beta_rad[use, j])
+    # Undo pitch then roll (measured): w = R2(θ)ᵀ ŝ, v = R1(φ)ᵀ w.
+    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
+    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
+    wx = cp * s_meas[:, 0] + sp * s_meas[:, 2]
+    wy = s_meas[:, 1]
+    wz = -sp * s_meas[:, 0] + cp * s_meas[:, 2]
+    vx, vy = wx, cr * wy - sr * wz
+    s_r = np.asarray(sun_orbit_frame)
+    yaw = np.arctan2(s_r[:, 1], s_r[:, 0]) - np.arctan2(vy, vx)
+    yaw = (yaw + np.pi) % (2 * np.pi) - np.pi
+    sep_sin = np.hypot(s_r[:, 0], s_r[:, 1])  # sine of the Sun's angle from the yaw axis
+    ok = (head_idx >= 0) & (sep_sin >= np.sin(min_sun_separation_deg * DEG))
+    yaw = np.where(ok, yaw, np.nan)
+    sigma = np.where(ok, sigma_angle / np.maximum(sep_sin, 1e-12), np.nan)
+    return yaw, sigma, np.where(ok, head_idx, -1)
+
+
+def make_telemetry(truth, suite: SensorSuite, rngs, min_sun_separation_deg: float = 10.0
+                   ) -> Telemetry:
+    """Sense a ``sim.truth.TruthResult`` with ``suite``; ``rngs`` maps each of
+    ``suite.stream_names()`` to its own generator."""
+    on = suite.noise_enabled
+    roll, pitch = earth_sensor(truth.roll_rad, truth.pitch_rad, suite.earth, rngs["earth"], on)
+    speeds = tachometers(truth.wheel_speeds_radps, suite.tachometer, rngs["tachometer"], on)
+    # Half the solar disc hidden counts as lost: the heads need the Sun's centroid.
+    sun = sun_sensors(truth.sun_body, truth.shadow >= 0.5, suite.sun_heads, rngs, on)
+    yaw, sigma, head = derive_yaw(sun, suite.sun_heads, roll, pitch, truth.sun_orbit_frame,
+                                  min_sun_separation_deg)
+    return Telemetry(truth.t_s, roll, pitch, yaw, sigma, head, speeds, sun)
