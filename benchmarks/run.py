@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -19,6 +20,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from scenarios.loader import load_scenario  # noqa: E402
+from scenarios.runner import simulate  # noqa: E402
 from sim.control import Control  # noqa: E402
 from sim.environment import Environment  # noqa: E402
 from sim.frames import GeoOrbit  # noqa: E402
@@ -64,6 +67,17 @@ def main() -> None:
         print("bench note: no C compiler; truth_s_per_day ran in the VM", flush=True)
     vm = TruthModel(2, backend="vm")
     report("truth_vm_s_per_day", median_time(lambda: truth_day(vm), repeats=3), "s")
+
+    # Issue 3: truth plus sensors and ground yaw (no files), and the whole command.
+    scenario = load_scenario("goes_next_equinox", ["duration_s=86400"])
+    report("truth_telemetry_s_per_day",
+           median_time(lambda: simulate(scenario, model=compiled), repeats=5), "s")
+    with tempfile.TemporaryDirectory() as tmp:
+        def command():
+            subprocess.run([str(Path(sys.executable).with_name("dynprop")), "simulate",
+                            "goes_next_equinox", "--out", f"{tmp}/run", "--force"],
+                           check=True, capture_output=True)
+        report("simulate_2day_wall_s", median_time(command, repeats=3), "s")
 
 
 if __name__ == "__main__":

@@ -154,18 +154,20 @@ def sun_sensors(sun_body: np.ndarray, lit: np.ndarray, heads, rngs, noise_enable
     beta = np.full((n, len(heads)), np.nan)
     for k, head in enumerate(heads):
         b, u, y = head.axes
-        sb, su, sy = sun_body @ b, sun_body @ u, sun_body @ y
-        a_true = np.arctan2(su, sb)
-        b_true = np.arctan2(sy, sb)
-        vis = (sb > 0) & (np.abs(a_true) <= head.fov_in_plane_deg * DEG) \
-            & (np.abs(b_true) <= head.fov_out_of_plane_deg * DEG) & lit
-        sigma = np.full(n, head.noise_deg)
-        if head.kind == "cass":
-            off_boresight = np.arccos(np.clip(sb, -1.0, 1.0))
-            sigma = head.noise_deg / np.maximum(np.cos(off_boresight), 1e-3)
-        e = _noise(rngs[head.name], (n, 2), 1.0, noise_enabled) * sigma[:, None]
+        # Drawn for every sample, seen or not, so the stream never shifts.
+        e = _noise(rngs[head.name], (n, 2), 1.0, noise_enabled)
+        sb = sun_body @ b
+        front = np.flatnonzero((sb > 0) & lit)
+        s = sun_body[front]
+        a_true = np.arctan2(s @ u, sb[front])
+        b_true = np.arctan2(s @ y, sb[front])
+        inside = (np.abs(a_true) <= head.fov_in_plane_deg * DEG) \
+            & (np.abs(b_true) <= head.fov_out_of_plane_deg * DEG)
+        idx, a_true, b_true = front[inside], a_true[inside], b_true[inside]
+        # CASS: σ grows as 1/cos(off-boresight); ŝ·b is that cosine for a unit ŝ.
+        sigma = head.noise_deg if head.kind == "dss" else head.noise_deg / sb[idx]
         q = head.quantum_deg
-        visible[:, k] = vis
-        alpha[vis, k] = quantize(a_true[vis] / DEG + e[vis, 0], q) * DEG
-        beta[vis, k] = quantize(b_true[vis] / DEG + e[vis, 1], q) * DEG
+        visible[idx, k] = True
+        alpha[idx, k] = quantize(a_true / DEG + sigma * e[idx, 0], q) * DEG
+        beta[idx, k] = quantize(b_true / DEG + sigma * e[idx, 1], q) * DEG
     return SunReadings(visible, alpha, beta)

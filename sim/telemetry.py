@@ -61,35 +61,36 @@ def select_head(sun: SunReadings, heads) -> np.ndarray:
 
 def derive_yaw(sun: SunReadings, heads, roll_rad, pitch_rad, sun_orbit_frame,
                min_sun_separation_deg: float = 10.0) -> tuple[np.ndarray, ...]:
-    """Ground yaw (rad), its a-priori σ (rad) and the head used, per sample."""
+    """Ground yaw (rad), its a-priori σ (rad) and the head used, per sample.
+
+    Only samples that can have a yaw (a head sees the Sun, the Sun is far enough
+    from the yaw axis) are computed; the rest stay NaN / −1.
+    """
     n = len(roll_rad)
+    s_r = np.asarray(sun_orbit_frame)
+    sep_sin = np.hypot(s_r[:, 0], s_r[:, 1])  # sine of the Sun's angle from the yaw axis
     head_idx = select_head(sun, heads)
-    s_meas = np.full((n, 3), np.nan)
-    sigma_angle = np.full(n, np.nan)
+    head_idx[sep_sin < np.sin(min_sun_separation_deg * DEG)] = -1
+    yaw = np.full(n, np.nan)
+    sigma = np.full(n, np.nan)
     for j, head in enumerate(heads):
-        use = head_idx == j
-        if not np.any(use):
+        use = np.flatnonzero(head_idx == j)
+        if use.size == 0:
             continue
         b, u, y = head.axes
-        ta, tb = np.tan(sun.alpha_rad[use, j]), np.tan(sun.beta_rad[use, j])
-        v = b + ta[:, None] * u + tb[:, None] * y
-        s_meas[use] = v / np.linalg.norm(v, axis=1, keepdims=True)
-        sigma_angle[use] = _angle_sigma_rad(head, sun.alpha_rad[use, j], sun.beta_rad[use, j])
-    # Undo pitch then roll (measured): w = R2(θ)ᵀ ŝ, v = R1(φ)ᵀ w.
-    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
-    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
-    wx = cp * s_meas[:, 0] + sp * s_meas[:, 2]
-    wy = s_meas[:, 1]
-    wz = -sp * s_meas[:, 0] + cp * s_meas[:, 2]
-    vx, vy = wx, cr * wy - sr * wz
-    s_r = np.asarray(sun_orbit_frame)
-    yaw = np.arctan2(s_r[:, 1], s_r[:, 0]) - np.arctan2(vy, vx)
-    yaw = (yaw + np.pi) % (2 * np.pi) - np.pi
-    sep_sin = np.hypot(s_r[:, 0], s_r[:, 1])  # sine of the Sun's angle from the yaw axis
-    ok = (head_idx >= 0) & (sep_sin >= np.sin(min_sun_separation_deg * DEG))
-    yaw = np.where(ok, yaw, np.nan)
-    sigma = np.where(ok, sigma_angle / np.maximum(sep_sin, 1e-12), np.nan)
-    return yaw, sigma, np.where(ok, head_idx, -1)
+        alpha, beta = sun.alpha_rad[use, j], sun.beta_rad[use, j]
+        v = b + np.tan(alpha)[:, None] * u + np.tan(beta)[:, None] * y
+        s_meas = v / np.linalg.norm(v, axis=1, keepdims=True)
+        # Undo pitch then roll (measured): w = R2(θ)ᵀ ŝ, then the x–y part of R1(φ)ᵀ w.
+        cp, sp = np.cos(pitch_rad[use]), np.sin(pitch_rad[use])
+        cr, sr = np.cos(roll_rad[use]), np.sin(roll_rad[use])
+        wx = cp * s_meas[:, 0] + sp * s_meas[:, 2]
+        wz = -sp * s_meas[:, 0] + cp * s_meas[:, 2]
+        vy = cr * s_meas[:, 1] - sr * wz
+        psi = np.arctan2(s_r[use, 1], s_r[use, 0]) - np.arctan2(vy, wx)
+        yaw[use] = (psi + np.pi) % (2 * np.pi) - np.pi
+        sigma[use] = _angle_sigma_rad(head, alpha, beta) / sep_sin[use]
+    return yaw, sigma, head_idx
 
 
 def make_telemetry(truth, suite: SensorSuite, rngs, min_sun_separation_deg: float = 10.0
