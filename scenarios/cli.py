@@ -115,6 +115,11 @@ def main(argv: list[str] | None = None) -> int:
         # Files the user named (or their directories) could not be read or written.
         print(f"dynprop: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
+    except FloatingPointError as exc:
+        # A valid scenario whose closed loop diverges (its gains, its step): not a
+        # bug in dynprop, but nothing to write either.
+        print(f"dynprop: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("dynprop: interrupted; nothing was written", file=sys.stderr)
         return 130

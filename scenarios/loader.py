@@ -6,6 +6,7 @@ the file) and the problem, which the CLI prints before exiting with status 2.
 
 from __future__ import annotations
 
+import re
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -30,6 +31,16 @@ _Loader.yaml_implicit_resolvers = {
     first: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:timestamp"]
     for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
 }
+# YAML 1.1 needs a dot in a float ("1e-6" would be a string); accept the YAML 1.2 /
+# JSON forms that analysts write, such as 1e-6, 5E-5 and 6e1.
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
+
+
+class _DuplicateKey(Exception):
+    pass
 
 
 def _mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> dict:
@@ -37,12 +48,20 @@ def _mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> dic
     for key_node, _ in node.value:
         key = loader.construct_object(key_node, deep=deep)
         if key in seen:
-            raise ScenarioError(f"line {key_node.start_mark.line + 1}: duplicate key {key!r}")
+            mark = key_node.start_mark
+            raise _DuplicateKey(f":{mark.line + 1}:{mark.column + 1}: duplicate key {key!r}")
         seen.add(key)
     return loader.construct_mapping(node, deep=deep)
 
 
+def _no_set(loader: _Loader, node: yaml.Node):
+    # A YAML set has no order: it would silently scramble a vector's components.
+    raise _DuplicateKey(f":{node.start_mark.line + 1}:{node.start_mark.column + 1}: "
+                        "!!set is not allowed; use a list")
+
+
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping)
+_Loader.add_constructor("tag:yaml.org,2002:set", _no_set)
 
 
 def bundled_dir() -> Path:
@@ -56,6 +75,8 @@ def bundled_names() -> list[str]:
 def _parse_yaml(text: str, where: str) -> Any:
     try:
         return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    except _DuplicateKey as exc:
+        raise ScenarioError(f"{where}{exc}") from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         pos = f":{mark.line + 1}:{mark.column + 1}" if mark else ""

@@ -40,6 +40,7 @@ def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
     is removed.
     """
     out = check_out_dir(out, force)
+    created = [p for p in reversed(out.absolute().parents) if not p.exists()]
     out.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     # mkdtemp makes 0700; give the finished directory the user's usual permissions.
@@ -50,6 +51,10 @@ def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
         yield stage
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
+        # Parents this call created go too: a failed run leaves no trace at all.
+        for parent in reversed(created):
+            with contextlib.suppress(OSError):
+                parent.rmdir()
         raise
     backup = None
     try:

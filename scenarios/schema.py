@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
 
 from sim import ephemeris, spacecraft
 
@@ -168,18 +168,35 @@ class SunHead(_Section):
                              "growing as 1/cos(off-boresight) (deg)")
 
 
-def _head(kind, hour, fov_in, fov_out, quantum, noise):
-    return Field(default_factory=lambda: SunHead(
-        kind=kind, boresight_hour_angle_deg=hour, fov_in_plane_deg=fov_in,
-        fov_out_of_plane_deg=fov_out, quantum_deg=quantum, noise_deg=noise))
+# GOES-Next heads (sim.sensors.goes_next_sun_sensors): the DSS on dusk, two CASS.
+HEAD_DEFAULTS = {
+    "dss": dict(kind="dss", boresight_hour_angle_deg=90.0, fov_in_plane_deg=32.0,
+                fov_out_of_plane_deg=32.0, quantum_deg=0.125, noise_deg=0.0042),
+    "cass1": dict(kind="cass", boresight_hour_angle_deg=-75.0, fov_in_plane_deg=45.0,
+                  fov_out_of_plane_deg=35.0, quantum_deg=0.039, noise_deg=1.0),
+    "cass2": dict(kind="cass", boresight_hour_angle_deg=15.0, fov_in_plane_deg=45.0,
+                  fov_out_of_plane_deg=35.0, quantum_deg=0.039, noise_deg=1.0),
+}
 
 
 class SunSensors(_Section):
-    dss: SunHead = _head("dss", 90.0, 32.0, 32.0, 0.125, 0.0042)
-    cass1: SunHead = _head("cass", -75.0, 45.0, 35.0, 0.039, 1.0)
-    cass2: SunHead = _head("cass", 15.0, 45.0, 35.0, 0.039, 1.0)
+    dss: SunHead = Field(default_factory=lambda: SunHead(**HEAD_DEFAULTS["dss"]))
+    cass1: SunHead = Field(default_factory=lambda: SunHead(**HEAD_DEFAULTS["cass1"]))
+    cass2: SunHead = Field(default_factory=lambda: SunHead(**HEAD_DEFAULTS["cass2"]))
     min_sun_separation_deg: float = Field(10.0, ge=0, lt=90, description="no ground yaw when "
                                           "the Sun is closer than this to the yaw axis (deg)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fill_heads(cls, data):
+        # Each head's keys default to that head's own values, so `dss: {noise_deg: 0.01}`
+        # changes only the noise (heads differ, so plain field defaults cannot do this).
+        if isinstance(data, dict):
+            data = dict(data)
+            for name, defaults in HEAD_DEFAULTS.items():
+                if isinstance(data.get(name), dict):
+                    data[name] = {**defaults, **data[name]}
+        return data
 
 
 class Tachometer(_Section):
@@ -215,14 +232,15 @@ class Estimator(_Section):
 class Scenario(_Section):
     name: str = Field(min_length=1, description="short identifier (required)")
     description: str = Field("", description="one line shown by `dynprop scenarios`")
-    dynprop_version: str | None = Field(None, description="written into resolved scenarios; "
-                                        "ignored on input")
+    dynprop_version: None = Field(None, description="written into resolved scenarios; "
+                                  "ignored on input")
     seed: int = Field(20260320, ge=0, description="root of every random stream")
     epoch_utc: str = Field("2026-03-20T12:00:00Z", description="ISO 8601 UTC start time; sets "
                            "the Sun and so the season (1950–2049)")
     duration_s: float = Field(172800.0, ge=0, le=MAX_DURATION_S, description="length (s)")
-    sample_interval_s: float = Field(0.512, gt=0, le=60, description="telemetry and "
-                                     "integration step (s)")
+    sample_interval_s: float = Field(0.512, gt=0, le=1.024, description="telemetry, "
+                                     "control and integration step; the sampled control "
+                                     "loop goes unstable above ~2.2 s (s)")
     spacecraft: Spacecraft = Field(default_factory=Spacecraft)
     orbit: Orbit = Field(default_factory=Orbit)
     initial_state: InitialState = Field(default_factory=InitialState)
@@ -230,6 +248,11 @@ class Scenario(_Section):
     control: Control = Field(default_factory=Control)
     sensors: Sensors = Field(default_factory=Sensors)
     estimator: Estimator = Field(default_factory=Estimator)
+
+    @field_validator("dynprop_version", mode="before")
+    @classmethod
+    def _ignore_version(cls, v):
+        return None
 
     @field_validator("epoch_utc")
     @classmethod

@@ -297,6 +297,11 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
     model = model or truth_model(n, DEFAULT_CHUNK, requested_backend())
     # One step per output sample: the last step's end state is kept as final_state.
     states, aux = model.rollout(initial.state_vector(spacecraft, orbit), inputs, p)
+    bad = ~np.isfinite(states).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise FloatingPointError(f"the truth became non-finite at t = {k * dt_s:.1f} s: the "
+                                 "closed loop is unstable for these gains and this step")
     return _result(t_s, states, aux, inputs, shadow, spacecraft, model.backend)
 
 
