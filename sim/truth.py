@@ -180,19 +180,21 @@ def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environm
     n, n_wheels = len(t_s), ripple.shape[1]
     jd0 = ephemeris.julian_date(epoch)
     alpha = orbit.right_ascension(t_s, ephemeris.gmst_rad(jd0))
-    cos_a, sin_a = np.cos(alpha), np.sin(alpha)
-    sun_n, sun_dist = _sun_on_grid(t_s, jd0)
-    # Satellite-to-Sun direction in the orbit frame.  With the closed-form frame of
-    # GeoOrbit.orbit_frame, C_RN ŝ_N is below; the satellite sits at −R ẑ_R, so
-    # d ŝ − r adds R to the z component (a parallax of up to R/AU = 0.016°).
+    sun = _sun_on_grid(t_s, jd0)
+    # Satellite-to-Sun direction in the orbit frame.  The geocentric Sun, at right
+    # ascension λ and declination δ, is (ρ sin(λ−α), −sin δ, −ρ cos(λ−α)) in the frame
+    # of GeoOrbit.orbit_frame (ρ = cos δ); the satellite sits at −R ẑ_R, so d ŝ − r
+    # adds R to the z component (a parallax of up to R/AU = 0.016°).
+    phase = sun["ra"] - alpha
+    d, radius = sun["dist"], orbit.radius_m
     sun_r = np.empty((n, 3))
-    sun_r[:, 0] = sun_dist * (-sin_a * sun_n[:, 0] + cos_a * sun_n[:, 1])
-    sun_r[:, 1] = sun_dist * -sun_n[:, 2]
-    sun_r[:, 2] = sun_dist * (-cos_a * sun_n[:, 0] - sin_a * sun_n[:, 1]) + orbit.radius_m
-    sat_sun_dist = np.sqrt(np.einsum("ij,ij->i", sun_r, sun_r))
+    sun_r[:, 0] = d * sun["cos_dec"] * np.sin(phase)
+    sun_r[:, 1] = -d * sun["sin_dec"]
+    sun_r[:, 2] = radius - d * sun["cos_dec"] * np.cos(phase)
+    # |d ŝ + R ẑ|² = d² + 2 d R ŝ_z + R²
+    sat_sun_dist = np.sqrt(d * (d - 2.0 * radius * sun["cos_dec"] * np.cos(phase)) + radius**2)
     sun_r /= sat_sun_dist[:, None]
-    shadow = _shadow_on_grid(orbit.radius_m * np.stack([cos_a, sin_a, np.zeros(n)], axis=-1),
-                             sun_n, sun_dist, env.shadow_model)
+    shadow = _shadow_on_grid(alpha, sun, radius, env.shadow_model)
     mag = env.magnetic
     if mag.enabled and np.any(mag.profile_amplitude_Am2):
         m_prof = mag.profile(t_s)
@@ -217,7 +219,13 @@ def _checked(a: np.ndarray | None, shape: tuple[int, int], name: str) -> np.ndar
     return a
 
 
-def _shadow_on_grid(r_sat: np.ndarray, sun_n: np.ndarray, sun_dist: np.ndarray, model: str,
+def _sun_inertial(sun: dict[str, np.ndarray], idx) -> np.ndarray:
+    """Geocentric Sun unit vectors (inertial) at the given sample indices."""
+    ra, cd = sun["ra"][idx], sun["cos_dec"][idx]
+    return np.stack([cd * np.cos(ra), cd * np.sin(ra), sun["sin_dec"][idx]], axis=-1)
+
+
+def _shadow_on_grid(alpha: np.ndarray, sun: dict[str, np.ndarray], radius: float, model: str,
                     every: int = 64) -> np.ndarray:
     """Shadow factor on the output grid, evaluated only where it can be below 1.
 
@@ -226,40 +234,45 @@ def _shadow_on_grid(r_sat: np.ndarray, sun_n: np.ndarray, sun_dist: np.ndarray, 
     satellite covers in one coarse interval; only those samples get the exact
     model.  Outside eclipse season nothing at all is evaluated finely.
     """
-    n = len(r_sat)
+    n = len(alpha)
     out = np.ones(n)
+
+    def r_sat(i):
+        return radius * np.stack([np.cos(alpha[i]), np.sin(alpha[i]), np.zeros(len(i))], -1)
+
     idx = np.arange(0, n, every)
-    r, s = r_sat[idx], sun_n[idx]
-    along = np.einsum("ij,ij->i", r, s)
-    perp = np.sqrt(np.maximum(np.einsum("ij,ij->i", r, r) - along**2, 0.0))
-    radius = np.sqrt(np.einsum("ij,ij->i", r, r))
-    step_len = np.linalg.norm(r_sat[min(every, n - 1)] - r_sat[0]) if n > 1 else 0.0
-    reach = ephemeris.R_EARTH_M + 2.0 * radius * ephemeris.R_SUN_M / sun_dist[idx] + step_len
+    along = np.einsum("ij,ij->i", r_sat(idx), _sun_inertial(sun, idx))
+    perp = np.sqrt(np.maximum(radius**2 - along**2, 0.0))
+    step_len = radius * abs(alpha[min(every, n - 1)] - alpha[0])
+    reach = ephemeris.R_EARTH_M + 2.0 * radius * ephemeris.R_SUN_M / sun["dist"][idx] + step_len
     near = (along < step_len) & (perp < reach)
     if not np.any(near):
         return out
     fine = np.zeros(n, dtype=bool)
     for k in np.flatnonzero(near):
         fine[max(idx[k] - every, 0):idx[k] + every + 1] = True
-    out[fine] = ephemeris.shadow_factor(r_sat[fine], sun_n[fine], sun_dist[fine], model=model)
+    fine = np.flatnonzero(fine)
+    out[fine] = ephemeris.shadow_factor(r_sat(fine), _sun_inertial(sun, fine),
+                                        sun["dist"][fine], model=model)
     return out
 
 
-def _sun_on_grid(t_s: np.ndarray, jd0: float, every: int = 128) -> tuple[np.ndarray, np.ndarray]:
-    """Sun unit vector and distance on the output grid.
+def _sun_on_grid(t_s: np.ndarray, jd0: float, every: int = 128) -> dict[str, np.ndarray]:
+    """The Sun's right ascension, cos and sin of declination, and distance (m) on the
+    output grid.
 
-    The ephemeris is evaluated every ``every`` samples (about a minute) and
-    interpolated linearly, then renormalised: the Sun moves about 1e-5 rad in a
-    minute, so the interpolation error (≈ angle²/8 ≈ 2e-11 rad) is far below the
-    ephemeris's own 0.01°, and the day-long evaluation becomes negligible.
+    The ephemeris is evaluated every ``every`` samples (about a minute) and these
+    slowly varying quantities are interpolated linearly: the Sun moves about 1e-5 rad
+    a minute, so the error (≈ angle²/8 ≈ 2e-11 rad) is far below the ephemeris's own
+    0.01°, and the day-long evaluation costs almost nothing.
     """
     idx = np.arange(0, len(t_s) + every - 1, every)
     idx[-1] = min(idx[-1], len(t_s) - 1)
     idx = np.unique(idx)
-    unit_c, dist_c = ephemeris.sun_position_eci(jd0 + t_s[idx] / 86400.0)
-    unit = np.stack([np.interp(t_s, t_s[idx], unit_c[:, k]) for k in range(3)], axis=-1)
-    unit /= np.linalg.norm(unit, axis=-1, keepdims=True)
-    return unit, np.interp(t_s, t_s[idx], dist_c)
+    unit, dist = ephemeris.sun_position_eci(jd0 + t_s[idx] / 86400.0)
+    nodes = {"ra": np.unwrap(np.arctan2(unit[:, 1], unit[:, 0])),
+             "cos_dec": np.hypot(unit[:, 0], unit[:, 1]), "sin_dec": unit[:, 2], "dist": dist}
+    return {k: np.interp(t_s, t_s[idx], v) for k, v in nodes.items()}
 
 
 def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environment,
@@ -297,9 +310,10 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
     model = model or truth_model(n, DEFAULT_CHUNK, requested_backend())
     # One step per output sample: the last step's end state is kept as final_state.
     states, aux = model.rollout(initial.state_vector(spacecraft, orbit), inputs, p)
-    bad = ~np.isfinite(states).all(axis=1)
-    if bad.any():
-        k = int(np.argmax(bad))
+    # NaN never turns finite again in the state update, so the last state tells;
+    # only a failed run pays for finding where it went.
+    if not np.all(np.isfinite(states[-1])):
+        k = int(np.argmax(~np.isfinite(states).all(axis=1)))
         raise FloatingPointError(f"the truth became non-finite at t = {k * dt_s:.1f} s: the "
                                  "closed loop is unstable for these gains and this step")
     return _result(t_s, states, aux, inputs, shadow, spacecraft, model.backend)
