@@ -13,7 +13,20 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
 
-from sim import ephemeris, spacecraft
+from sim import control as sim_control
+from sim import environment as sim_env
+from sim import ephemeris, sensors, spacecraft
+from sim.frames import GeoOrbit
+from sim.telemetry import MIN_SUN_SEPARATION_DEG
+
+# The simulator's dataclasses hold the GOES-Next defaults; the schema reads them
+# from there so that the two can never disagree.
+_SOLAR = sim_env.SolarTorque()
+_MAG = sim_env.MagneticTorque()
+_RIPPLE = sim_env.WheelRipple()
+_CTRL = sim_control.Control()
+_EARTH = sensors.EarthSensor()
+_TACH = sensors.Tachometer()
 
 # Elements stay strict (an int is a float; a string or bool is not), while the
 # containers accept YAML lists.
@@ -71,9 +84,9 @@ class Spacecraft(_Section):
 
 
 class Orbit(_Section):
-    longitude_deg: float = Field(-75.0, ge=-180, le=360,
+    longitude_deg: float = Field(float(np.rad2deg(GeoOrbit().longitude_rad)), ge=-180, le=360,
                                  description="east longitude of the geostationary slot (deg)")
-    radius_m: float = Field(42_164_170.0, gt=6.6e6, description="orbit radius (m)")
+    radius_m: float = Field(GeoOrbit().radius_m, gt=6.6e6, description="orbit radius (m)")
 
 
 class InitialState(_Section):
@@ -90,11 +103,14 @@ class GravityGradient(_Section):
 
 class Solar(_Section):
     enabled: bool = Field(True, description="solar array/sail imbalance torque (off in eclipse)")
-    untrimmed_torque_Nm: float = Field(5e-5, description="imbalance κ with the tab at 0 (N m)")
-    tab_effectiveness_Nm_per_deg: float = Field(2.5e-6, description="dκ/d(tab) (N m/deg)")
-    trim_tab_deg: float = Field(19.6, description="trim tab setting (deg); residual κ = "
+    untrimmed_torque_Nm: float = Field(_SOLAR.untrimmed_torque_Nm,
+                                       description="imbalance κ with the tab at 0 (N m)")
+    tab_effectiveness_Nm_per_deg: float = Field(_SOLAR.tab_effectiveness_Nm_per_deg,
+                                                description="dκ/d(tab) (N m/deg)")
+    trim_tab_deg: float = Field(_SOLAR.trim_tab_deg,
+                                description="trim tab setting (deg); residual κ = "
                                 "untrimmed − effectiveness · tab (default 1e-6 N m)")
-    lever_axis: Vec3 = Field((0.0, 1.0, 0.0),
+    lever_axis: Vec3 = Field(_SOLAR.lever_axis,
                              description="array-to-sail centre-of-pressure unit vector (body)")
 
     @field_validator("lever_axis")
@@ -108,17 +124,18 @@ class Solar(_Section):
 class Magnetic(_Section):
     enabled: bool = Field(True, description="residual and prescribed dipole torques "
                           "(the torquers are control and keep working)")
-    residual_dipole_Am2: Vec3 = Field((0.0, 8.0, 0.0), description="body-fixed dipole (A m²)")
-    profile_amplitude_Am2: Vec3 = Field((0.0, 0.0, 0.0),
+    residual_dipole_Am2: Vec3 = Field(_MAG.residual_dipole_Am2,
+                                      description="body-fixed dipole (A m²)")
+    profile_amplitude_Am2: Vec3 = Field(_MAG.profile_amplitude_Am2,
                                         description="prescribed control-dipole sine amplitude, "
                                         "per body axis (A m²)")
-    profile_period_s: float = Field(86164.0905, gt=0, description="its period (s)")
+    profile_period_s: float = Field(_MAG.profile_period_s, gt=0, description="its period (s)")
     profile_phase_deg: float = Field(0.0, description="its phase (deg)")
 
 
 class Ripple(_Section):
     enabled: bool = Field(True, description="wheel torque ripple (random, per wheel)")
-    psd_Nm2_per_Hz: float = Field(6e-7, ge=0,
+    psd_Nm2_per_Hz: float = Field(_RIPPLE.psd_Nm2_per_Hz, ge=0,
                                   description="one-sided PSD G; step variance G/(2Δt) ((N m)²/Hz)")
 
 
@@ -135,14 +152,18 @@ class Control(_Section):
     enabled: bool = Field(True, description="all attitude control")
     pitch_loop: bool = Field(True, description="pitch PD loop on the common wheel torque")
     roll_yaw_loop: bool = Field(True, description="roll/yaw loop on the differential torque")
-    pitch_bandwidth_radps: float = Field(0.02, ge=0, description="pitch loop ω_p (rad/s)")
-    pitch_damping: float = Field(0.7, ge=0, description="pitch loop ζ (-)")
-    roll_gain_per_s: float = Field(0.01, description="k_r in ḣ = H(k_r φ + k_ṙ φ̇) + k_h h (1/s)")
-    roll_rate_gain: float = Field(1.8, description="k_ṙ (-)")
-    yaw_momentum_gain_per_s: float = Field(-0.01, description="k_h (1/s)")
+    pitch_bandwidth_radps: float = Field(_CTRL.pitch_bandwidth_radps, ge=0,
+                                         description="pitch loop ω_p (rad/s)")
+    pitch_damping: float = Field(_CTRL.pitch_damping, ge=0, description="pitch loop ζ (-)")
+    roll_gain_per_s: float = Field(_CTRL.roll_gain_per_s,
+                                   description="k_r in ḣ = H(k_r φ + k_ṙ φ̇) + k_h h (1/s)")
+    roll_rate_gain: float = Field(_CTRL.roll_rate_gain, description="k_ṙ (-)")
+    yaw_momentum_gain_per_s: float = Field(_CTRL.yaw_momentum_gain_per_s, description="k_h (1/s)")
     magnetic_unloading: bool = Field(True, description="torquers unload h (m = B×T/|B|²)")
-    unloading_gain_per_s: float = Field(3e-4, ge=0, description="k_m in T_z = −k_m h (1/s)")
-    torquer_max_Am2: float = Field(10.0, ge=0, description="torquer saturation per axis (A m²)")
+    unloading_gain_per_s: float = Field(_CTRL.unloading_gain_per_s, ge=0,
+                                        description="k_m in T_z = −k_m h (1/s)")
+    torquer_max_Am2: float = Field(_CTRL.torquer_max_Am2, ge=0,
+                                   description="torquer saturation per axis (A m²)")
 
 
 class Noise(_Section):
@@ -151,8 +172,9 @@ class Noise(_Section):
 
 
 class EarthSensor(_Section):
-    noise_deg: float = Field(0.01, ge=0, description="roll and pitch noise, 1σ (deg)")
-    quantum_deg: float = Field(0.01, gt=0, description="roll and pitch quantisation (deg)")
+    noise_deg: float = Field(_EARTH.noise_deg, ge=0, description="roll and pitch noise, 1σ (deg)")
+    quantum_deg: float = Field(_EARTH.quantum_deg, gt=0,
+                               description="roll and pitch quantisation (deg)")
 
 
 class SunHead(_Section):
@@ -168,14 +190,12 @@ class SunHead(_Section):
                              "growing as 1/cos(off-boresight) (deg)")
 
 
-# GOES-Next heads (sim.sensors.goes_next_sun_sensors): the DSS on dusk, two CASS.
+# GOES-Next heads, from sim.sensors: the DSS on dusk, two CASS.
 HEAD_DEFAULTS = {
-    "dss": dict(kind="dss", boresight_hour_angle_deg=90.0, fov_in_plane_deg=32.0,
-                fov_out_of_plane_deg=32.0, quantum_deg=0.125, noise_deg=0.0042),
-    "cass1": dict(kind="cass", boresight_hour_angle_deg=-75.0, fov_in_plane_deg=45.0,
-                  fov_out_of_plane_deg=35.0, quantum_deg=0.039, noise_deg=1.0),
-    "cass2": dict(kind="cass", boresight_hour_angle_deg=15.0, fov_in_plane_deg=45.0,
-                  fov_out_of_plane_deg=35.0, quantum_deg=0.039, noise_deg=1.0),
+    h.name: dict(kind=h.kind, boresight_hour_angle_deg=h.boresight_hour_angle_deg,
+                 fov_in_plane_deg=h.fov_in_plane_deg, fov_out_of_plane_deg=h.fov_out_of_plane_deg,
+                 quantum_deg=h.quantum_deg, noise_deg=h.noise_deg)
+    for h in sensors.goes_next_sun_sensors()
 }
 
 
@@ -183,7 +203,8 @@ class SunSensors(_Section):
     dss: SunHead = Field(default_factory=lambda: SunHead(**HEAD_DEFAULTS["dss"]))
     cass1: SunHead = Field(default_factory=lambda: SunHead(**HEAD_DEFAULTS["cass1"]))
     cass2: SunHead = Field(default_factory=lambda: SunHead(**HEAD_DEFAULTS["cass2"]))
-    min_sun_separation_deg: float = Field(10.0, ge=0, lt=90, description="no ground yaw when "
+    min_sun_separation_deg: float = Field(MIN_SUN_SEPARATION_DEG, ge=0, lt=90,
+                                          description="no ground yaw when "
                                           "the Sun is closer than this to the yaw axis (deg)")
 
     @model_validator(mode="before")
@@ -200,8 +221,8 @@ class SunSensors(_Section):
 
 
 class Tachometer(_Section):
-    quantum_rpm: float = Field(0.0163, gt=0, description="quantisation (rpm)")
-    noise_3sigma_rpm: float = Field(0.0978, ge=0, description="noise, 3σ (rpm)")
+    quantum_rpm: float = Field(_TACH.quantum_rpm, gt=0, description="quantisation (rpm)")
+    noise_3sigma_rpm: float = Field(_TACH.noise_3sigma_rpm, ge=0, description="noise, 3σ (rpm)")
 
 
 class Sensors(_Section):

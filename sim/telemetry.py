@@ -17,6 +17,8 @@ import numpy as np
 
 from .sensors import DEG, SensorSuite, SunReadings, earth_sensor, sun_sensors, tachometers
 
+MIN_SUN_SEPARATION_DEG = 10.0  # no ground yaw closer than this to the yaw axis
+
 
 @dataclass(frozen=True)
 class Telemetry:
@@ -60,7 +62,7 @@ def select_head(sun: SunReadings, heads) -> np.ndarray:
 
 
 def derive_yaw(sun: SunReadings, heads, roll_rad, pitch_rad, sun_orbit_frame,
-               min_sun_separation_deg: float = 10.0) -> tuple[np.ndarray, ...]:
+               min_sun_separation_deg: float = MIN_SUN_SEPARATION_DEG) -> tuple[np.ndarray, ...]:
     """Ground yaw (rad), its a-priori σ (rad) and the head used, per sample.
 
     Only samples that can have a yaw (a head sees the Sun, the Sun is far enough
@@ -93,8 +95,8 @@ def derive_yaw(sun: SunReadings, heads, roll_rad, pitch_rad, sun_orbit_frame,
     return yaw, sigma, head_idx
 
 
-def make_telemetry(truth, suite: SensorSuite, rngs, min_sun_separation_deg: float = 10.0
-                   ) -> Telemetry:
+def make_telemetry(truth, suite: SensorSuite, rngs,
+                   min_sun_separation_deg: float = MIN_SUN_SEPARATION_DEG) -> Telemetry:
     """Sense a ``sim.truth.TruthResult`` with ``suite``; ``rngs`` maps each of
     ``suite.stream_names()`` to its own generator."""
     on = suite.noise_enabled

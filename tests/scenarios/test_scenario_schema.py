@@ -465,3 +465,20 @@ def test_scenario_reference_doc_matches_the_schema():
         pytest.skip("docs/scenario-reference.md has not been generated yet")
     assert doc.read_text() == reference.render(), \
         "docs/scenario-reference.md is stale: regenerate with `python -m scenarios.reference`"
+
+
+def test_schema_defaults_are_the_simulator_defaults():
+    """One source of defaults: a scenario that sets nothing builds exactly the
+    simulator's default parameter objects."""
+    from sim.control import Control
+    from sim.environment import Environment
+    from sim.frames import GeoOrbit
+    from sim.sensors import SensorSuite
+    from sim.spacecraft import goes_next
+
+    s = validate({"name": "defaults"})
+    assert build.build_control(s) == Control()
+    assert build.build_environment(s) == Environment()
+    assert build.build_sensors(s) == SensorSuite()
+    assert build.orbit(s) == GeoOrbit()
+    assert build.build_spacecraft(s) == goes_next()
