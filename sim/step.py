@@ -197,20 +197,3 @@ def split_aux(aux: np.ndarray, n: int) -> dict[str, np.ndarray]:
         out[name] = aux[:, i] if k == 1 else aux[:, i:i + k]
         i += k
     return out
-
-
-def build_chunk(n: int, chunk: int) -> ca.Function:
-    """``chunk`` RK4 steps via ``mapaccum``: ``(x0, inputs…, p) -> (X, AUX)``.
-
-    Each per-step input is a (k × chunk) matrix, X holds the states after each
-    step and AUX the step-start auxiliaries.  The parameter vector enters once
-    and is repeated symbolically, so callers pass it a single time per chunk.
-    """
-    step = build_step(n)
-    acc = step.mapaccum(f"dynprop_acc{n}_{chunk}", chunk, [0], [0])
-    x0 = ca.MX.sym("x0", 7 + n)
-    mapped = [ca.MX.sym(name, k, chunk) for name, k in input_layout(n)]
-    p = ca.MX.sym("p", n_params(n))
-    xs, aux = acc(x0, *mapped, ca.repmat(p, 1, chunk))
-    return ca.Function(f"dynprop_chunk{n}_{chunk}", [x0, *mapped, p], [xs, aux],
-                       ["x0", *(name for name, _ in input_layout(n)), "p"], ["X", "AUX"])

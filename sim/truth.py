@@ -15,13 +15,15 @@ from functools import lru_cache
 
 import numpy as np
 
+from rollout.chunks import ChunkedRollout
+from rollout.compiled import requested_backend
+
 from . import ephemeris
-from .compiled import compile_function, requested_backend
 from .control import Control
 from .environment import Environment
 from .frames import GeoOrbit, dcm_from_quat, quat_from_euler312
 from .spacecraft import Spacecraft
-from .step import build_chunk, input_layout, n_aux, pack_params, split_aux
+from .step import build_step, input_layout, pack_params, split_aux
 
 DEFAULT_CHUNK = 4096
 TAIL_CHUNK = 256  # a short run's or a long run's last steps, without 4096-step padding
@@ -99,72 +101,21 @@ class TruthResult:
 
 
 class TruthModel:
-    """The compiled chunk function for one wheel count, built once and reused."""
+    """The compiled truth step for one wheel count, built once and reused."""
 
     def __init__(self, n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str | None = None):
         self.n_wheels = n_wheels
         self.chunk = chunk
-        self.function, self.backend = compile_function(build_chunk(n_wheels, chunk), backend)
-        self.tail_chunk = min(TAIL_CHUNK, chunk)
-        # The tail function always uses the backend the main one ended up with, so a
-        # run never mixes compiled and VM arithmetic.
-        self.tail_function, _ = compile_function(build_chunk(n_wheels, self.tail_chunk),
-                                                 self.backend)
+        self.rollout_engine = ChunkedRollout(build_step(n_wheels), chunk, TAIL_CHUNK, backend)
+        self.backend = self.rollout_engine.backend
 
     def rollout(self, x0: np.ndarray, inputs: dict[str, np.ndarray], p: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
         """Run one step per row of the per-step ``inputs`` (``step.input_layout``
         names, each (N, k)).  Returns states (N+1, n_x) including x0, and aux (N, n_aux).
         """
-        layout = input_layout(self.n_wheels)
-        arrays = [np.ascontiguousarray(inputs[name], dtype=float).reshape(-1, k)
-                  for name, k in layout]
-        n_steps, nx = arrays[0].shape[0], x0.size
-        states = np.empty((n_steps + 1, nx))
-        states[0] = x0
-        aux = np.empty((n_steps, n_aux(self.n_wheels)))
-        p = np.ascontiguousarray(p, dtype=float)
-        n_main = n_steps - n_steps % self.chunk
-        self._run(self.function, self.chunk, 0, n_main, states, aux, arrays, p)
-        self._run(self.tail_function, self.tail_chunk, n_main, n_steps, states, aux, arrays, p)
-        return states, aux
-
-    @staticmethod
-    def _run(function, c, begin, end, states, aux, arrays, p) -> None:
-        buf, run = function.buffer()
-        nx = states.shape[1]
-        for start in range(begin, end, c):
-            stop = min(start + c, end)
-            full = stop - start == c
-            blocks = [a[start:stop] if full else _pad(a[start:stop], c) for a in arrays]
-            x_out = states[start + 1:stop + 1] if full else np.empty((c, nx))
-            a_out = aux[start:stop] if full else np.empty((c, aux.shape[1]))
-            x_in = states[start].copy()
-            # The buffer keeps raw pointers: every array must stay alive until run(),
-            # and outputs must be views into states/aux, not silent copies.
-            x_flat, a_flat = x_out.reshape(-1), a_out.reshape(-1)
-            assert np.shares_memory(x_flat, x_out) and np.shares_memory(a_flat, a_out)
-            buf.set_arg(0, memoryview(x_in))
-            for i, blk in enumerate(blocks, start=1):
-                buf.set_arg(i, memoryview(blk.reshape(-1)))
-            buf.set_arg(len(blocks) + 1, memoryview(p))
-            buf.set_res(0, memoryview(x_flat))
-            buf.set_res(1, memoryview(a_flat))
-            run()
-            if buf.ret() != 0:
-                raise RuntimeError(f"truth rollout failed in chunk starting at step {start}")
-            if not full:
-                states[start + 1:stop + 1] = x_out[:stop - start]
-                aux[start:stop] = a_out[:stop - start]
-
-
-def _pad(block: np.ndarray, rows: int) -> np.ndarray:
-    """Pad a short final chunk by repeating its last column (the extra steps are
-    computed and discarded)."""
-    out = np.empty((rows, block.shape[1]))
-    out[:len(block)] = block
-    out[len(block):] = block[-1]
-    return out
+        arrays = [inputs[name] for name, _ in input_layout(self.n_wheels)]
+        return self.rollout_engine.run(x0, arrays, p)
 
 
 @lru_cache(maxsize=8)

@@ -4,7 +4,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from sim import compiled
+from rollout import compiled
 from sim.control import Control
 from sim.environment import Environment
 from sim.spacecraft import goes_next_backup
