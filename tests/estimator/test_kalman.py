@@ -1,0 +1,217 @@
+"""The Kalman filter and RTS smoother against independent references.
+
+Φ, Γ and Q_d here come from scipy's expm and Van Loan's method, not from the
+closed forms, so these tests check the filter alone.
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import scipy.linalg as sl
+
+from estimator.consistency import chi2_bounds, fraction_inside, nees, nis
+from estimator.kalman import Measurements, dense_filter, kalman_filter, pack, rts_smoother, unpack
+from estimator.model import (
+    H_WHEEL,
+    N_STATES,
+    Y,
+    ModelParams,
+    ProcessNoise,
+    dynamics_matrix,
+    input_vector,
+    noise_density,
+)
+
+DT = 0.512
+# GOES-Next numbers from the paper (Section 2, Eq. 1), typed here independently.
+H = -0.1082 * 2 * 5485 * 2 * np.pi / 60 * np.cos(np.deg2rad(1.656))
+PARAMS = ModelParams(3364.376, 954.936, 3461.393, H, np.sqrt(3.986004418e14 / 42164170.0**3))
+NOISE = ProcessNoise(q_x=5.4e-7, q_z=5.4e-7, q_w=5e-10, q_px=3e-18, q_pz=3e-18, q_cx=3e-18,
+                     q_cz=3e-18)
+R_ROLL, R_YAW, R_H = 3.3e-8, (0.04 * np.pi / 180) ** 2, 1.5e-7
+
+
+def expm_discretization(p=PARAMS, q=NOISE, dt=DT):
+    F, Q, n = dynamics_matrix(p), noise_density(p, q), N_STATES
+    Phi = sl.expm(F * dt)
+    aug = sl.expm(np.block([[F, np.eye(n)], [np.zeros((n, n)), np.zeros((n, n))]]) * dt)
+    van = sl.expm(np.block([[-F, Q], [np.zeros((n, n)), F.T]]) * dt)  # Van Loan (1978)
+    Qd = van[n:, n:].T @ van[:n, n:]
+    Phi[np.abs(Phi) < 1e-300] = 0.0
+    Phi[4:, :4] = 0.0  # structural zeros of Eq. 15 (expm leaves ~1e-20 there)
+    Gam = aug[:n, n:]
+    Gam[4:, :4] = 0.0
+    return SimpleNamespace(Phi=Phi, Gamma=Gam, Qd=0.5 * (Qd + Qd.T))
+
+
+DISC = expm_discretization()
+P0 = np.diag([1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12])
+
+
+def simulate_linear(n_steps, n_runs, rng, disc=DISC, yaw_hours=16.0, u=None):
+    """Truth and measurements of the linear model itself (Eq. 11), driven by noise
+    of exactly the filter's statistics: x_{k+1} = Φx_k + Γu_k + w_k, w ~ N(0, Q_d)."""
+    L = np.linalg.cholesky(disc.Qd + 1e-40 * np.eye(N_STATES))
+    x = rng.multivariate_normal(np.zeros(N_STATES), P0, size=n_runs)
+    xs = np.empty((n_steps, n_runs, N_STATES))
+    u = np.zeros((n_steps, N_STATES)) if u is None else u
+    for k in range(n_steps):
+        xs[k] = x
+        x = x @ disc.Phi.T + u[k] @ disc.Gamma.T + rng.standard_normal((n_runs, N_STATES)) @ L.T
+    t_h = np.arange(n_steps) * DT / 3600
+    sd = np.sqrt([R_ROLL, R_YAW, R_H])
+    z = xs[..., [0, Y, H_WHEEL]] + sd * rng.standard_normal((n_steps, n_runs, 3))
+    z[(t_h % 24) >= yaw_hours, :, 1] = np.nan
+    return xs, z
+
+
+def meas(z):
+    return Measurements(z[:, 0], z[:, 1], z[:, 2], R_ROLL, R_YAW, R_H)
+
+
+def test_compiled_filter_matches_dense_numpy_reference(rng):
+    """With process noise, missing yaw and inputs: the compiled filter equals a
+    plain-numpy filter to 1e-9 (the issue's requirement; it is ~1e-15)."""
+    n = 3000
+    u = input_vector(PARAMS, 1e-6 * np.sin(np.arange(n) / 500), -2e-6, 1e-5)
+    xs, z = simulate_linear(n, 1, rng, u=u, yaw_hours=0.2)
+    z = z[:, 0]
+    z[::7, 0] = np.nan  # some roll and h gaps too
+    z[::11, 2] = np.nan
+    res = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, u=u)
+    x_ref, P_ref = dense_filter(meas(z), DISC, np.zeros(N_STATES), P0, u=u)
+    np.testing.assert_allclose(res.x, x_ref, rtol=0, atol=1e-9 * np.abs(x_ref).max())
+    np.testing.assert_allclose(res.P, P_ref, rtol=0, atol=1e-9 * np.abs(P_ref).max())
+    # No update where a value is missing: NaN innovation there, finite elsewhere.
+    assert np.all(np.isnan(res.innovations[::7, 0]))
+    assert np.all(np.isfinite(res.innovations[1::7, 0]))
+
+
+def test_no_process_noise_equals_batch_weighted_least_squares(rng):
+    """Q = 0: the filter's final estimate is the batch weighted least-squares fit of
+    the initial state (prior included as one more weighted observation), mapped to
+    the final time.  Exact equivalence, so a tight tolerance."""
+    disc = expm_discretization(q=ProcessNoise(0, 0, 0))
+    n = 4000
+    xs, z = simulate_linear(n, 1, rng, disc=disc, yaw_hours=0.3)
+    z = z[:, 0]
+    x_prior = np.zeros(N_STATES)
+    res = kalman_filter(meas(z), disc, x_prior, P0)
+    # Batch: z_k = G_k Φ^k x0 + v_k, plus the prior x0 ~ N(x_prior, P0).
+    rows, rhs, w = [], [], []
+    Phik = np.eye(N_STATES)
+    for k in range(n):
+        for i, (idx, r) in enumerate(zip((0, Y, H_WHEEL), (R_ROLL, R_YAW, R_H), strict=True)):
+            if np.isfinite(z[k, i]):
+                rows.append(Phik[idx])
+                rhs.append(z[k, i])
+                w.append(1 / r)
+        Phik = disc.Phi @ Phik
+    A, b, W = np.array(rows), np.array(rhs), np.array(w)
+    info = A.T @ (W[:, None] * A) + np.linalg.inv(P0)
+    x0_hat = np.linalg.solve(info, A.T @ (W * b) + np.linalg.solve(P0, x_prior))
+    x_final = np.linalg.matrix_power(disc.Phi, n - 1) @ x0_hat
+    P_final = np.linalg.matrix_power(disc.Phi, n - 1) @ np.linalg.inv(info) \
+        @ np.linalg.matrix_power(disc.Phi, n - 1).T
+    sig = np.sqrt(np.diag(P_final))
+    # Compare in units of the estimate's own σ: batch and recursion differ by round-off.
+    assert np.max(np.abs(res.x[-1] - x_final) / sig) < 1e-6
+    np.testing.assert_allclose(np.sqrt(np.diag(res.P[-1])), sig, rtol=1e-6)
+
+
+def test_diffuse_prior_equals_batch_least_squares_without_prior(rng):
+    """The issue's form: Q = 0 and a diffuse prior (P0 × 1e8, where the prior's
+    information is 1e-8 of the data's), so the final estimate equals batch weighted
+    least squares on the data alone, to 1e-3 of its own σ."""
+    disc = expm_discretization(q=ProcessNoise(0, 0, 0))
+    n = 6000
+    _, z = simulate_linear(n, 1, rng, disc=disc, yaw_hours=24.0)
+    z = z[:, 0]
+    res = kalman_filter(meas(z), disc, np.zeros(N_STATES), P0 * 1e8)
+    rows, rhs, w = [], [], []
+    Phik = np.eye(N_STATES)
+    for k in range(n):
+        for i, (idx, r) in enumerate(zip((0, Y, H_WHEEL), (R_ROLL, R_YAW, R_H), strict=True)):
+            rows.append(Phik[idx])
+            rhs.append(z[k, i])
+            w.append(1 / r)
+        Phik = disc.Phi @ Phik
+    A, b, W = np.array(rows), np.array(rhs), np.array(w)
+    # Column scaling keeps the normal equations well conditioned.
+    scale = np.sqrt(np.diag(P0))
+    As = A * scale
+    x0_hat = scale * np.linalg.lstsq(As * np.sqrt(W)[:, None], b * np.sqrt(W), rcond=None)[0]
+    info_s = As.T @ (W[:, None] * As)
+    Pn = np.linalg.matrix_power(disc.Phi, n - 1)
+    x_final = Pn @ x0_hat
+    sig = np.sqrt(np.diag(Pn @ (np.linalg.inv(info_s) * np.outer(scale, scale)) @ Pn.T))
+    assert np.max(np.abs(res.x[-1] - x_final) / sig) < 1e-3
+
+
+def test_nees_and_nis_within_chi2_bounds(rng):
+    """Filter on its own linear model with matching noise, 30 independent runs of
+    20 h: the run-averaged NEES of the attitude/rate/h states lies inside its 95%
+    χ² bounds at ≥ 90% of the epochs after convergence; the 9-state NEES, averaged
+    over runs and epochs, inside its 99% bounds; the averaged NIS likewise."""
+    n_runs, n = 30, int(20 * 3600 / DT)
+    xs, z = simulate_linear(n, n_runs, rng)
+    nees_all, nees5_all, nis_all = [], [], []
+    for j in range(n_runs):
+        res = kalman_filter(meas(z[:, j]), DISC, np.zeros(N_STATES), P0)
+        keep = slice(2000, None, 500)  # after convergence, decimated
+        nees_all.append(nees(res.x[keep], res.P[keep], xs[keep, j]))
+        nees5_all.append(nees(res.x[keep], res.P[keep], xs[keep, j], states=range(5)))
+        nis_all.append(nis(res.innovations[keep], res.innovation_var[keep]))
+    # Attitude, rates and h decorrelate within minutes: a per-epoch test is fair.
+    avg5 = np.mean(nees5_all, axis=0)
+    assert fraction_inside(avg5, chi2_bounds(5, n_runs)) >= 0.90
+    # The torque states barely move from their prior in 20 h, so each run's torque
+    # error is one prior draw, constant in time: count one sample per run (99%).
+    lo, hi = chi2_bounds(N_STATES, n_runs, 0.99)
+    assert lo < np.mean(nees_all) < hi
+    nis_all = np.array(nis_all)  # (runs, epochs, 3): roll and h always, yaw off in gaps
+    for i in (0, 2):
+        assert fraction_inside(nis_all[:, :, i].mean(axis=0), chi2_bounds(1, n_runs)) >= 0.90
+    has_yaw = np.isfinite(nis_all[0, :, 1])
+    assert has_yaw.any() and not has_yaw.all()
+    yaw_avg = nis_all[:, has_yaw, 1].mean(axis=0)
+    assert fraction_inside(yaw_avg, chi2_bounds(1, n_runs)) >= 0.90
+
+
+def test_smoother_covariance_never_exceeds_the_filter_and_errors_are_consistent(rng):
+    n_runs, n = 10, int(6 * 3600 / DT)
+    xs, z = simulate_linear(n, n_runs, rng, yaw_hours=3.0)
+    ratios, nees_s = [], []
+    for j in range(n_runs):
+        res = kalman_filter(meas(z[:, j]), DISC, np.zeros(N_STATES), P0)
+        sm = rts_smoother(res, DISC)
+        diff = res.P[::200] - sm.P[::200]
+        # P_filter − P_smoothed is positive semi-definite at every sample.
+        scale = np.sqrt(np.einsum("nii->ni", res.P[::200]))
+        eig = np.linalg.eigvalsh(diff / scale[:, :, None] / scale[:, None, :])
+        assert eig.min() > -1e-9
+        ratios.append(sm.sigma[:, Y] / res.sigma[:, Y])
+        nees_s.append(nees(sm.x[1000::500], sm.P[1000::500], xs[1000::500, j],
+                           states=range(5)))
+    assert np.all(np.concatenate(ratios) <= 1 + 1e-9)
+    avg = np.mean(nees_s, axis=0)
+    assert fraction_inside(avg, chi2_bounds(5, n_runs)) >= 0.90
+
+
+def test_pack_unpack_round_trip():
+    a = np.random.default_rng(1).standard_normal((4, N_STATES, N_STATES))
+    sym = a + np.swapaxes(a, 1, 2)
+    np.testing.assert_array_equal(unpack(pack(sym)), sym)
+
+
+def test_bad_inputs_are_rejected():
+    z = np.zeros((5, 3))
+    with pytest.raises(ValueError, match="variances"):
+        kalman_filter(Measurements(z[:, 0], z[:, 1], z[:, 2], -1.0, 1.0, 1.0), DISC,
+                      np.zeros(N_STATES), P0)
+    with pytest.raises(ValueError, match="inputs"):
+        kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, u=np.zeros((5, 3)))
+    bad = SimpleNamespace(Phi=np.ones((9, 9)), Gamma=DISC.Gamma, Qd=DISC.Qd)
+    with pytest.raises(ValueError, match="structure"):
+        kalman_filter(meas(z), bad, np.zeros(N_STATES), P0)
