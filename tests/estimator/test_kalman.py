@@ -15,9 +15,9 @@ from estimator.kalman import Measurements, dense_filter, kalman_filter, pack, rt
 from estimator.model import (
     H_WHEEL,
     N_STATES,
-    Y,
     ModelParams,
     ProcessNoise,
+    Y,
     dynamics_matrix,
     input_vector,
     noise_density,
