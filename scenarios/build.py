@@ -6,6 +6,7 @@ from datetime import datetime
 
 import numpy as np
 
+from estimator.model import ModelParams, ProcessNoise
 from sim import control, environment, ephemeris, sensors, spacecraft
 from sim.frames import GeoOrbit
 from sim.truth import InitialState
@@ -82,3 +83,15 @@ def build_sensors(s: Scenario) -> sensors.SensorSuite:
         (_head("dss", c.sun.dss), _head("cass1", c.sun.cass1), _head("cass2", c.sun.cass2)),
         sensors.Tachometer(c.tachometer.quantum_rpm, c.tachometer.noise_3sigma_rpm),
         c.noise.enabled)
+
+
+def estimator_model(s: Scenario) -> tuple[ModelParams, ProcessNoise]:
+    """The paper's linear model for this scenario: the diagonal inertias (the
+    model neglects products of inertia, Section 3), the signed pitch momentum of
+    the configured wheels (Eq. 1), the orbit rate, and the estimator's process noise."""
+    sc = build_spacecraft(s)
+    J = sc.J
+    params = ModelParams(J[0, 0], J[1, 1], J[2, 2], float(sc.pitch_bias_Nms()),
+                         orbit(s).rate_radps)
+    q = s.estimator.process_noise
+    return params, ProcessNoise(q.q_x, q.q_z, q.q_w, q.q_px, q.q_pz, q.q_cx, q.q_cz)
