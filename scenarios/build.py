@@ -95,3 +95,15 @@ def estimator_model(s: Scenario) -> tuple[ModelParams, ProcessNoise]:
                          orbit(s).rate_radps)
     q = s.estimator.process_noise
     return params, ProcessNoise(q.q_x, q.q_z, q.q_w, q.q_px, q.q_pz, q.q_cx, q.q_cz)
+
+
+def estimator_sensor_specs(s: Scenario):
+    """The sensor numbers the covariance analysis uses (Section 6), from the scenario;
+    the yaw variance is the DSS's, the sensor that sees the Sun last before the gap."""
+    from estimator.covariance import SensorSpecs
+    c, w = s.sensors, s.spacecraft.wheels
+    return SensorSpecs(dt_s=s.sample_interval_s, tach_quantum_rpm=c.tachometer.quantum_rpm,
+                       tach_noise_3sigma_rpm=c.tachometer.noise_3sigma_rpm,
+                       roll_noise_deg=c.earth.noise_deg, roll_quantum_deg=c.earth.quantum_deg,
+                       yaw_noise_deg=c.sun.dss.noise_deg, yaw_quantum_deg=c.sun.dss.quantum_deg,
+                       wheel_inertia_kgm2=w.spin_inertia_kgm2, cant_deg=w.cant_deg)

@@ -47,6 +47,10 @@ def _build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--out", required=True, type=Path, help="new run directory")
     sim.add_argument("--force", action="store_true", help="replace a non-empty --out")
     sub.add_parser("scenarios", help="list the bundled scenarios")
+    obs = sub.add_parser("observability", help="rank tables of the paper's Section 4")
+    _scenario_args(obs)
+    cov = sub.add_parser("covariance", help="steady-state yaw accuracy of Section 6")
+    _scenario_args(cov)
     plot = sub.add_parser("plot", help="(re)draw the figures of a run directory")
     plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser
@@ -99,7 +103,28 @@ def _cmd_plot(args) -> int:
     return 0
 
 
-COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd_plot}
+def _cmd_observability(args) -> int:
+    from estimator.observability import format_rank_table
+
+    from .build import estimator_model
+    params, _ = estimator_model(load_with_overrides(args))
+    print(format_rank_table(params))
+    return 0
+
+
+def _cmd_covariance(args) -> int:
+    from estimator.covariance import covariance_report, format_covariance_report
+
+    from .build import estimator_model, estimator_sensor_specs
+    scenario = load_with_overrides(args)
+    params, noise = estimator_model(scenario)
+    print(format_covariance_report(covariance_report(params, noise,
+                                                     estimator_sensor_specs(scenario))))
+    return 0
+
+
+COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd_plot,
+            "observability": _cmd_observability, "covariance": _cmd_covariance}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,418 @@
+"""Steady-state yaw accuracy (Section 6, Eqs. 39–56) and the measurement variances.
+
+Four routes to σ_yaw, from the paper's closed form to the discrete filter:
+
+1. Eq. 54 (p11, p22, p12 with α of Eq. 54d) and Eq. 55 (p22 ≈ q/(ω0 H²)) for the
+   nutation-averaged state x̃ = [r + h/H, y] (Eq. 40);
+2. the continuous Riccati equation 49 with F̃ (Eq. 41b), Q̃ = (q/H²) I₂ (Eq. 43;
+   optionally + q_w/2, as the text after Eq. 43 says), G̃ = [1 0] and
+   R = R_k Δt (Eq. 51), solved by ``scipy.linalg.solve_continuous_are``;
+3. the discrete filter on the 5-state model [r, ṙ/ω_n, y, ẏ/ω_n, h] at Δt with
+   roll and h measured every step: ``scipy.linalg.solve_discrete_are`` on the
+   Van Loan discretisation (``scipy.linalg.expm``);
+4. the full 9-state filter with a daily yaw gap (``periodic_gap_covariance``).
+
+Eqs. 41b, 53 and 54 hold as printed with the signed H: x̃ obeys Eq. 41 for either
+sign of H (Eq. 39 divides Eq. 7 by ω_n = H/I), and the stabilising root of
+Eq. 53b, p12 = ω0 R (α − 1) > 0, is the CARE solution.  In the limit
+|ω_n| → ∞ (H, R fixed) the 5-state filter's P̃ tends to Eq. 54's p22 and p12,
+but its p11 to p11 + √((q_x + q_z) R)/|H|: the nutation-band roll error, which
+averaging drops, is as large as p11 itself.  At the GOES-Next numbers the
+filter's bandwidth on the nutation states, of order √(q/(H² R)) ≈ 0.045 rad/s,
+is not small against |ω_n| = 0.036 rad/s, so Eq. 54's p11 and p12 do not
+describe the filter (p12 even changes sign); p22, set at orbit rate, agrees to
+0.2 %.
+
+The discrete recursions run in scaled coordinates z = S⁻¹x, S = diag(1, 1, 1, 1,
+|H|, |H|ω0 …): h/|H| is the roll it offsets, N/(|H|ω0) the yaw a constant
+torque balances, so every state is an angle and P is well conditioned.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import expm, solve_continuous_are, solve_discrete_are
+
+from .model import H_WHEEL, ModelParams, ProcessNoise, R, Y, dynamics_matrix, noise_density
+
+SIDEREAL_DAY_S = 86164.0905
+PAPER_SIGMA_YAW_DEG = 0.040          # Eq. 56
+PAPER_SIGMA_YAW_RAD = 6.9e-4         # Eq. 56
+RPM = 2 * np.pi / 60
+
+
+@dataclass(frozen=True)
+class SensorSpecs:
+    """Sections 2.1 and 2.3; yaw is the DSS's (the paper gives the filter none; errata 7)."""
+
+    dt_s: float = 0.512
+    tach_quantum_rpm: float = 0.0163
+    tach_noise_3sigma_rpm: float = 0.0978
+    roll_noise_deg: float = 0.01
+    roll_quantum_deg: float = 0.01
+    yaw_noise_deg: float = 0.0042
+    yaw_quantum_deg: float = 0.125
+    wheel_inertia_kgm2: float = 0.1082
+    cant_deg: float = 1.656
+
+
+def quantized_variance(sigma: float, quantum: float) -> float:
+    """σ² + quantum²/12: noise plus uniform quantisation error (Eqs. 46–47)."""
+    return sigma**2 + quantum**2 / 12.0
+
+
+def tach_variance(s: SensorSpecs = SensorSpecs()) -> float:
+    """R_tach of Eq. 46, (rad/s)², per wheel."""
+    return quantized_variance(s.tach_noise_3sigma_rpm / 3.0, s.tach_quantum_rpm) * RPM**2
+
+
+def roll_variance(s: SensorSpecs = SensorSpecs()) -> float:
+    """R_roll of Eq. 47, rad²."""
+    return quantized_variance(s.roll_noise_deg, s.roll_quantum_deg) * (np.pi / 180) ** 2
+
+
+def yaw_variance(s: SensorSpecs = SensorSpecs()) -> float:
+    """Sun-sensor yaw variance, rad² (the rule of Eq. 47)."""
+    return quantized_variance(s.yaw_noise_deg, s.yaw_quantum_deg) * (np.pi / 180) ** 2
+
+
+def h_variance(s: SensorSpecs = SensorSpecs()) -> float:
+    """Variance of h = I_w sin c (ω1 − ω2) (Eq. 2) from two tachometers, (N m s)²."""
+    return 2.0 * (s.wheel_inertia_kgm2 * np.sin(np.deg2rad(s.cant_deg))) ** 2 * tach_variance(s)
+
+
+def combined_variance(H_Nms: float, s: SensorSpecs = SensorSpecs()) -> float:
+    """R_k of Eq. 48: the variance of the measured x̃1 = r + h/H."""
+    return roll_variance(s) + h_variance(s) / H_Nms**2
+
+
+def continuous_R(H_Nms: float, s: SensorSpecs = SensorSpecs()) -> float:
+    """R = R_k Δt of Eq. 51, rad² s."""
+    return combined_variance(H_Nms, s) * s.dt_s
+
+
+def torque_noise_density(torque_Nm: float = 5e-6, correlation_s: float = SIDEREAL_DAY_S / 4):
+    """q of Eq. 45: mean-square torque error × correlation time (a quarter orbit)."""
+    return torque_Nm**2 * correlation_s
+
+
+def ripple_noise_density(psd_per_hz: float = 6e-7, cant_deg: float = 1.656,
+                         paper: bool = False) -> float:
+    """q_w of Eq. 44 for two wheels of one-sided ripple PSD G (N m)²/Hz.
+
+    ``paper=True``: the printed expression 2 sin²c G/2π (1.595e-10, printed
+    1.3e-10).  Default: the white-noise intensity of Eq. 35, 2 sin²c G/2 (5.0e-10),
+    as the truth model uses (docs/paper-errata.md entry 6).
+    """
+    return 2 * np.sin(np.deg2rad(cant_deg)) ** 2 * psd_per_hz / (2 * np.pi if paper else 2.0)
+
+
+# --- the nutation-averaged 2-state model (Eqs. 40–55) ---------------------------------
+
+def alpha(q, H_Nms: float, omega0: float, R_c: float):
+    """α of Eq. 54d; broadcasts over q."""
+    return np.sqrt(1.0 + np.asarray(q, dtype=float) / (omega0**2 * H_Nms**2 * R_c))
+
+
+def closed_form_steady_state(q, H_Nms: float, omega0: float, R_c: float):
+    """(p11, p22, p12) of Eq. 54; broadcasts over q."""
+    a = alpha(q, H_Nms, omega0, R_c)
+    root = np.sqrt((a + 3.0) * (a - 1.0))
+    return omega0 * R_c * root, omega0 * R_c * a * root, omega0 * R_c * (a - 1.0)
+
+
+def approx_yaw_variance(q, H_Nms: float, omega0: float):
+    """p22 ≈ q/(ω0 H²) of Eq. 55."""
+    return np.asarray(q, dtype=float) / (omega0 * H_Nms**2)
+
+
+def riccati_rates(P, q: float, H_Nms: float, omega0: float, R_c: float):
+    """(ṗ11, ṗ22, ṗ12) of Eqs. 53a–c."""
+    p11, p22, p12, qh = P[0, 0], P[1, 1], P[0, 1], q / H_Nms**2
+    return (2 * omega0 * p12 + qh - p11**2 / R_c, -2 * omega0 * p12 + qh - p12**2 / R_c,
+            omega0 * (p22 - p11) - p11 * p12 / R_c)
+
+
+def care_steady_state(omega0: float, H_Nms: float, R_c: float, q_x: float, q_z: float,
+                      q_w: float = 0.0, sign: float = 1.0) -> np.ndarray:
+    """Steady state of Eq. 49 (P̃ of Eq. 52) by ``solve_continuous_are``.
+
+    F̃ = sign · ω0 [[0, 1], [−1, 0]] (Eq. 41b for sign = +1; −1 only to test it),
+    Q̃ = diag(q_z, q_x)/H² (Eq. 43, W̃ = [w_z, −w_x]/H), plus q_w/2 on both if given.
+    """
+    F = sign * omega0 * np.array([[0.0, 1.0], [-1.0, 0.0]])
+    Q = np.diag([q_z + q_w / 2, q_x + q_w / 2]) / H_Nms**2
+    return solve_continuous_are(F.T, np.array([[1.0], [0.0]]), Q, np.array([[R_c]]))
+
+
+# --- discrete filters -----------------------------------------------------------------
+
+def van_loan(F: np.ndarray, Q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Φ = e^{FΔt} and Q_d = ∫ Φ(s) Q Φ(s)ᵀ ds (Van Loan, one ``expm``)."""
+    n = F.shape[0]
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n], M[:n, n:], M[n:, n:] = -F, Q, F.T
+    E = expm(M * dt)
+    Phi = E[n:, n:].T
+    return Phi, _sym(Phi @ E[:n, n:])
+
+
+def _sym(X: np.ndarray) -> np.ndarray:
+    return (X + X.T) / 2
+
+
+def _discrete_model(p: ModelParams, noise: ProcessNoise, dt: float, n: int):
+    """Scaled Φ, Q_d of the first n states, and the scale S."""
+    H = abs(p.H_Nms)
+    s = np.array([1.0, 1.0, 1.0, 1.0, H] + [H * p.omega0_radps] * 4)[:n]
+    F = dynamics_matrix(p)[:n, :n] * s[None, :] / s[:, None]
+    Q = noise_density(p, noise)[:n, :n] / np.outer(s, s)
+    return (*van_loan(F, Q, dt), s)
+
+
+def _rows(n: int, s: np.ndarray, states) -> np.ndarray:
+    """Unit measurement rows of ``states`` in the scaled coordinates."""
+    return np.eye(n)[list(states)] * s[None, :]
+
+
+def _reduced(P: np.ndarray, p: ModelParams) -> np.ndarray:
+    """P̃ of x̃ = [r + h/H, y] (Eq. 40) from a full covariance."""
+    T = np.zeros((2, P.shape[0]))
+    T[0, R], T[0, H_WHEEL], T[1, Y] = 1.0, 1.0 / p.H_Nms, 1.0
+    return T @ P @ T.T
+
+
+def roll_tach_steady_state(p: ModelParams, noise: ProcessNoise,
+                           sensors: SensorSpecs = SensorSpecs(), method: str = "dare") -> dict:
+    """Discrete steady state of the 5-state model with roll and h every Δt.
+
+    ``method="dare"``: ``solve_discrete_are``; ``"doubling"``: the limit of the
+    covariance recursion itself (``_fixed_point``), which also works where the
+    DARE's symplectic pencil has eigenvalues on the unit circle (q_w = 0 leaves h
+    without process noise).  Returns the a-priori and a-posteriori 5×5
+    covariances (original units) and σ_yaw of each; q_px … q_cz play no part
+    (the torque states are dropped, as in Section 6).
+    """
+    Phi, Qd, s = _discrete_model(p, noise, sensors.dt_s, 5)
+    Hm = _rows(5, s, (R, H_WHEEL))
+    Rm = np.diag([roll_variance(sensors), h_variance(sensors)])
+    if method == "dare":
+        Pz = solve_discrete_are(Phi.T, Hm.T, Qd, Rm)
+    elif method == "doubling":
+        Pz = _fixed_point((Phi, Hm.T @ np.linalg.solve(Rm, Hm), Qd), np.eye(5) * 1e-2)[0]
+    else:
+        raise ValueError(f"unknown method {method!r}")
+    K = np.linalg.solve(Hm @ Pz @ Hm.T + Rm, Hm @ Pz).T
+    Pz_post = Pz - K @ Hm @ Pz
+    prior, post = (np.outer(s, s) * _sym(X) for X in (Pz, Pz_post))
+    return {"P_prior": prior, "P_post": post, "sigma_yaw_prior_rad": float(np.sqrt(prior[Y, Y])),
+            "sigma_yaw_post_rad": float(np.sqrt(post[Y, Y]))}
+
+
+# The Riccati step "update with information G = Hᵀ R⁻¹ H, then propagate" maps the
+# a-priori P to Q + A P (I + G P)⁻¹ Aᵀ (A = Φ, Q = Q_d).  N steps compose to a map
+# of the same form, so 2^k steps cost k compositions (the doubling algorithm):
+# a day of 0.512 s steps is exact, with no batching of measurements.
+
+def _compose(m1, m2):
+    """The map m2 ∘ m1 (m1 first), each m = (A, G, Q)."""
+    A1, G1, Q1 = m1
+    A2, G2, Q2 = m2
+    W = np.eye(A1.shape[0]) + Q1 @ G2
+    WA1 = np.linalg.solve(W, A1)
+    return (A2 @ WA1, _sym(G1 + A1.T @ G2 @ WA1),
+            _sym(Q2 + A2 @ np.linalg.solve(W, Q1) @ A2.T))
+
+
+def _power(m, steps: int):
+    """The map of ``steps`` >= 1 identical steps (binary powering)."""
+    out, base = None, m
+    while steps:
+        if steps & 1:
+            out = base if out is None else _compose(out, base)
+        steps >>= 1
+        if steps:
+            base = _compose(base, base)
+    return out
+
+
+def _apply(m, P: np.ndarray) -> np.ndarray:
+    A, G, Q = m
+    return _sym(Q + A @ P @ np.linalg.solve(np.eye(P.shape[0]) + G @ P, A.T))
+
+
+def _fixed_point(m, P0: np.ndarray, tol: float = 1e-12, max_doublings: int = 64):
+    """(lim P_k, k) of the recursion P_k = m(P_{k-1}): P_k = m^k(P0) for k = 2^j, until
+    P_2k and P_k agree to ``tol`` (relative, max-norm)."""
+    P, k = _apply(m, P0), 1
+    for _ in range(max_doublings):
+        m = _compose(m, m)
+        P_next, k = _apply(m, P0), 2 * k
+        if np.abs(P_next - P).max() <= tol * np.abs(P_next).max():
+            return P_next, k
+        P = P_next
+    raise RuntimeError("the covariance recursion did not settle")
+
+
+@dataclass(frozen=True)
+class GapResult:
+    """Periodic steady state of the 9-state filter with a daily yaw gap.
+
+    t = 0 is the end of the gap (the first yaw measurement); yaw is measured on
+    [0, period − gap), roll and h throughout.  Covariances are a priori.
+    """
+
+    times_s: np.ndarray
+    sigma_yaw_rad: np.ndarray
+    P_gap_end: np.ndarray
+    days: int
+
+
+def periodic_gap_covariance(p: ModelParams, noise: ProcessNoise,
+                            sensors: SensorSpecs = SensorSpecs(), *, gap_s: float = 28800.0,
+                            period_s: float = 86400.0, sample_s: float = 600.0,
+                            tol: float = 1e-10) -> GapResult:
+    """σ_yaw over a day of the 9-state filter: roll and h every Δt, yaw 16 h of 24 h.
+
+    Without yaw, (y, N_cz) ∝ (−1/(ω0 H), 1) is unobservable (``observability``):
+    there is no steady state, only a periodic one.  The exact covariance
+    recursion (update every Δt, propagate with the Van Loan Φ, Q_d of Eq. 32)
+    runs from a broad prior for 2, 4, 8, … days until the gap-end covariance
+    after 2k days agrees with that after k days to ``tol`` (relative, max-norm);
+    one more day gives the profile, sampled about every ``sample_s``.  Steps and
+    days are composed by doubling (above ``_compose``): milliseconds, and it
+    settles even when the decay is only algebraic (q_cz = 0).
+    """
+    dt = sensors.dt_s
+    n_day, n_gap = round(period_s / dt), round(gap_s / dt)
+    if not 0 <= n_gap < n_day:
+        raise ValueError("need 0 <= gap < period")
+    Phi, Qd, s = _discrete_model(p, noise, dt, 9)
+    Rs = {R: roll_variance(sensors), Y: yaw_variance(sensors), H_WHEEL: h_variance(sensors)}
+    maps, cache = [], {}
+    for with_yaw, steps in [(True, n_day - n_gap), (False, n_gap)][:2 if n_gap else 1]:
+        states = (R, Y, H_WHEEL) if with_yaw else (R, H_WHEEL)
+        Hm = _rows(9, s, states)
+        G = Hm.T @ np.diag([1.0 / Rs[i] for i in states]) @ Hm
+        for size in np.diff(np.linspace(0, steps, max(1, round(steps * dt / sample_s)) + 1)
+                            .round().astype(int)):
+            key = (with_yaw, int(size))
+            if key not in cache:
+                cache[key] = _power((Phi, G, Qd), int(size))
+            maps.append((int(size), cache[key]))
+    day = maps[0][1]
+    for _, m in maps[1:]:
+        day = _compose(day, m)
+    P, days = _fixed_point(day, np.eye(9) * 1e-2, tol)
+    times, sig, X, k = [0.0], [np.sqrt(P[Y, Y])], P, 0
+    for size, m in maps:
+        X, k = _apply(m, X), k + size
+        times.append(k * dt)
+        sig.append(np.sqrt(X[Y, Y]))
+    return GapResult(np.array(times), np.array(sig), np.outer(s, s) * P, days)
+
+
+# --- report ---------------------------------------------------------------------------
+
+METHODS = {
+    "eq54": "Eq. 54 closed form",
+    "eq55": "Eq. 55 approximation q/(w0 H^2)",
+    "care": "Eq. 49 steady state (solve_continuous_are)",
+    "care_qw": "Eq. 49 with q + q_w/2",
+    "dare_prior": "5-state roll+h filter, a priori (DARE)",
+    "dare_post": "5-state roll+h filter, a posteriori",
+    "gap_end": "9-state, daily yaw gap: at the gap end",
+    "gap_max": "9-state, daily yaw gap: daily maximum",
+    "gap_min": "9-state, daily yaw gap: daily minimum",
+}
+
+
+def _entry(P2=None, p22=None) -> dict:
+    p11, p12, p22 = (None, None, p22) if P2 is None else (P2[0, 0], P2[0, 1], P2[1, 1])
+    return {"p11": p11 and float(p11), "p12": p12 and float(p12), "p22": float(p22),
+            "sigma_yaw_deg": float(np.rad2deg(np.sqrt(p22)))}
+
+
+def covariance_report(p: ModelParams, noise: ProcessNoise, sensors: SensorSpecs = SensorSpecs(),
+                      *, gap_s: float = 28800.0, period_s: float = 86400.0) -> dict:
+    """σ_yaw by every method (p11, p12, p22 of x̃ = [r + h/H, y], rad²), with the inputs.
+
+    The 2-state methods use q = (q_x + q_z)/2 (the paper takes them equal).
+    """
+    H, w0 = p.H_Nms, p.omega0_radps
+    q = 0.5 * (noise.q_x + noise.q_z)
+    Rc = continuous_R(H, sensors)
+    p11, p22, p12 = closed_form_steady_state(q, H, w0, Rc)
+    dare = roll_tach_steady_state(p, noise, sensors)
+    gap = periodic_gap_covariance(p, noise, sensors, gap_s=gap_s, period_s=period_s)
+    methods = {
+        "eq54": _entry(np.array([[p11, p12], [p12, p22]])),
+        "eq55": _entry(p22=approx_yaw_variance(q, H, w0)),
+        "care": _entry(care_steady_state(w0, H, Rc, noise.q_x, noise.q_z)),
+        "care_qw": _entry(care_steady_state(w0, H, Rc, noise.q_x, noise.q_z, noise.q_w)),
+        "dare_prior": _entry(_reduced(dare["P_prior"], p)),
+        "dare_post": _entry(_reduced(dare["P_post"], p)),
+        "gap_end": _entry(_reduced(gap.P_gap_end, p)),
+        "gap_max": _entry(p22=gap.sigma_yaw_rad.max() ** 2),
+        "gap_min": _entry(p22=gap.sigma_yaw_rad.min() ** 2),
+    }
+    inputs = {"H_Nms": H, "omega0_radps": w0, "q": q, "q_w": noise.q_w, "dt_s": sensors.dt_s,
+              "R_tach": tach_variance(sensors), "R_roll": roll_variance(sensors),
+              "R_h": h_variance(sensors), "R_yaw": yaw_variance(sensors), "R": Rc,
+              "R_k": combined_variance(H, sensors), "q_ratio": q / (w0**2 * H**2 * Rc),
+              "alpha": alpha(q, H, w0, Rc), "gap_s": gap_s, "period_s": period_s}
+    return {"inputs": {k: float(v) for k, v in inputs.items()}, "methods": methods,
+            "gap": {"days_to_converge": gap.days,
+                    "max_at_s": float(gap.times_s[np.argmax(gap.sigma_yaw_rad)] % period_s)},
+            "paper_sigma_yaw_deg": PAPER_SIGMA_YAW_DEG}
+
+
+def format_covariance_report(report: dict) -> str:
+    """The text of ``dynprop covariance``."""
+    i = report["inputs"]
+    lines = [
+        "Steady-state yaw accuracy (Section 6)",
+        f"H = {i['H_Nms']:.3f} N m s, w0 = {i['omega0_radps']:.5e} rad/s, "
+        f"q = {i['q']:.3e} (N m)^2 s (Eq. 45), q_w = {i['q_w']:.2e} (N m)^2 s",
+        f"R_tach = {i['R_tach']:.3e} (rad/s)^2 (Eq. 46), R_roll = {i['R_roll']:.3e} rad^2 "
+        f"(Eq. 47), R_k = {i['R_k']:.4e} rad^2 (Eq. 48)",
+        f"R = R_k dt = {i['R']:.3e} rad^2 s (Eq. 51), q/(w0^2 H^2 R) = {i['q_ratio']:.3e}, "
+        f"alpha = {i['alpha']:.2f} (Eq. 54d)",
+        f"9-state filter: yaw (R_yaw = {i['R_yaw']:.2e} rad^2) except {i['gap_s'] / 3600:g} h "
+        f"of every {i['period_s'] / 3600:g} h; periodic within {report['gap']['days_to_converge']}"
+        " days", "",
+        f"{'method':<44}{'p11 rad^2':>11}{'p12 rad^2':>11}{'p22 rad^2':>11}{'sigma_yaw':>11}",
+    ]
+    lines.append("-" * len(lines[-1]))
+    for key, label in METHODS.items():
+        m = report["methods"][key]
+        cells = "".join(f"{'-':>11}" if m[c] is None else f"{m[c]:>11.3e}"
+                        for c in ("p11", "p12", "p22"))
+        lines.append(f"{label:<44}{cells}{m['sigma_yaw_deg']:>10.4f}°")
+    lines.append(f"{'paper (Eq. 56)':<77}{report['paper_sigma_yaw_deg']:>10.3f}°")
+    return "\n".join(lines)
+
+
+def sigma_yaw_sweep(q_values, p: ModelParams, sensors: SensorSpecs = SensorSpecs(),
+                    q_w: float | None = None) -> dict:
+    """σ_yaw (rad) against q = q_x = q_z: Eq. 55, Eq. 54, and the discrete filter (a priori).
+
+    q_w defaults to ``ripple_noise_density()``; the discrete filter falls back to
+    the doubling recursion where the DARE solver gives up.
+    """
+    q_w = ripple_noise_density() if q_w is None else q_w
+
+    def discrete(v):
+        noise = ProcessNoise(v, v, q_w)
+        try:
+            return roll_tach_steady_state(p, noise, sensors)["sigma_yaw_prior_rad"]
+        except np.linalg.LinAlgError:
+            return roll_tach_steady_state(p, noise, sensors, "doubling")["sigma_yaw_prior_rad"]
+
+    q = np.atleast_1d(np.asarray(q_values, dtype=float))
+    H, w0 = p.H_Nms, p.omega0_radps
+    return {"q": q, "eq55": np.sqrt(approx_yaw_variance(q, H, w0)),
+            "eq54": np.sqrt(closed_form_steady_state(q, H, w0, continuous_R(H, sensors))[1]),
+            "discrete": np.array([discrete(v) for v in q])}
