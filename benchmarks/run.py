@@ -79,6 +79,27 @@ def main() -> None:
                            check=True, capture_output=True)
         report("simulate_2day_wall_s", median_time(command, repeats=3), "s")
 
+    # Issue 4: the filter over one day, roll and h every step, yaw two thirds of it.
+    from estimator.kalman import Measurements, dense_filter, kalman_filter
+    from estimator.transition import discretize
+    from scenarios.build import estimator_model
+    params, noise = estimator_model(scenario)
+    disc = discretize(params, noise, 0.512)
+    n = 168_750
+    rng = np.random.default_rng(3)
+    t_h = np.arange(n) * 0.512 / 3600
+    yaw = np.where(t_h < 16, rng.normal(0, 6e-4, n), np.nan)
+    meas = Measurements(rng.normal(0, 1.8e-4, n), yaw, rng.normal(0, 4e-4, n), 3.3e-8,
+                        4e-7, 1.5e-7)
+    x0, P0 = np.zeros(9), np.diag([1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12])
+    report("filter_s_per_day", median_time(lambda: kalman_filter(meas, disc, x0, P0),
+                                           repeats=5), "s")
+    k = 5000  # the plain-numpy loop, for comparison, scaled to a day
+    part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,
+                        1.5e-7)
+    report("filter_numpy_loop_s_per_day",
+           median_time(lambda: dense_filter(part, disc, x0, P0), repeats=3) * n / k, "s")
+
 
 if __name__ == "__main__":
     main()

@@ -215,3 +215,18 @@ def test_bad_inputs_are_rejected():
     bad = SimpleNamespace(Phi=np.ones((9, 9)), Gamma=DISC.Gamma, Qd=DISC.Qd)
     with pytest.raises(ValueError, match="structure"):
         kalman_filter(meas(z), bad, np.zeros(N_STATES), P0)
+
+
+def test_closed_form_discretization_drives_the_filter_like_expm(rng):
+    """The filter's Φ, Γ, Q_d in production come from the closed forms
+    (estimator.transition); they must give the expm/Van Loan filter's results."""
+    from estimator.transition import discretize
+    closed = discretize(PARAMS, NOISE, DT)
+    n = 4000
+    u = input_vector(PARAMS, 2e-6, -1e-6, 3e-6) * np.ones((n, 1))
+    _, z = simulate_linear(n, 1, rng, u=u, yaw_hours=0.3)
+    a = kalman_filter(meas(z[:, 0]), closed, np.zeros(N_STATES), P0, u=u)
+    b = kalman_filter(meas(z[:, 0]), DISC, np.zeros(N_STATES), P0, u=u)
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-10 * np.abs(b.x).max())
+    np.testing.assert_allclose(a.P_packed, b.P_packed, rtol=0,
+                               atol=1e-10 * np.abs(b.P_packed).max())
