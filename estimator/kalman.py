@@ -104,7 +104,7 @@ def filter_step() -> ca.Function:
     """``(s, z, m, r, u, p) -> (s_next, aux)`` with s = [x⁻, P⁻ (45)] at t_k,
     m the 0/1 presence of each measurement (z is 0 where absent: NaN never enters
     the compiled code, and CasADi would fold a ``z == z`` NaN test to true), and
-    aux = [x⁺, P⁺ (45), ν (3), S (3)] (ν, S NaN where there was no update)."""
+    aux = [x⁺, P⁺ (45), ν (3), S (3)] (the caller blanks ν, S where m = 0)."""
     s = ca.SX.sym("s", N_STATES + N_UT)
     z, m = ca.SX.sym("z", 3), ca.SX.sym("m", 3)
     r, u = ca.SX.sym("r", 3), ca.SX.sym("u", N_STATES)
@@ -113,18 +113,18 @@ def filter_step() -> ca.Function:
     eye = ca.SX.eye(N_STATES)
     nus, ss = [], []
     for i, idx in enumerate(MEAS_STATES):
-        valid = m[i] > 0.5
         S = P[idx, idx] + r[i]
-        K = P[:, idx] / S
+        # An absent measurement (m = 0) zeroes the gain, and with K = 0 the Joseph
+        # form returns P unchanged bit for bit (I P Iᵀ + r·0): no branches needed.
+        K = m[i] * P[:, idx] / S
         nu = z[i] - x[idx]
         G = ca.SX(1, N_STATES)
         G[idx] = 1.0
         ikg = eye - K @ G
-        P_upd = ikg @ P @ ikg.T + r[i] * (K @ K.T)  # Joseph form, Eq. 37
-        x = ca.if_else(valid, x + K * nu, x)
-        P = _unpack_sym(ca.if_else(valid, _pack_sym(P_upd), _pack_sym(P)))
-        nus.append(ca.if_else(valid, nu, np.nan))
-        ss.append(ca.if_else(valid, S, np.nan))
+        P = _symmetric(ikg @ P @ ikg.T + r[i] * (K @ K.T))  # Joseph form, Eq. 37
+        x = x + K * nu
+        nus.append(nu)
+        ss.append(S)
     x_next = phi @ x + gam @ u
     P_next = _symmetric(phi @ P @ phi.T + qd)
     out = ca.cse(ca.vertcat(x_next, _pack_sym(P_next), x, _pack_sym(P), *nus, *ss))
@@ -248,8 +248,11 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
     present = np.isfinite(z)
     states, aux = engine.run(s0, [np.where(present, z, 0.0), present.astype(float), r,
                                   _inputs(u, n)], pack_params(disc))
-    return FilterResult(aux[:, :N_STATES], aux[:, N_STATES:N_STATES + N_UT],
-                        aux[:, N_STATES + N_UT:N_STATES + N_UT + 3], aux[:, -3:],
+    nu = aux[:, N_STATES + N_UT:N_STATES + N_UT + 3]
+    S = aux[:, -3:]
+    nu[~present] = np.nan
+    S[~present] = np.nan
+    return FilterResult(aux[:, :N_STATES], aux[:, N_STATES:N_STATES + N_UT], nu, S,
                         states[-1, :N_STATES], unpack(states[-1, N_STATES:]), engine.backend)
 
 
