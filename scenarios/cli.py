@@ -46,6 +46,16 @@ def _build_parser() -> argparse.ArgumentParser:
     _scenario_args(sim)
     sim.add_argument("--out", required=True, type=Path, help="new run directory")
     sim.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    run = sub.add_parser("run", help="truth, telemetry, the filter on it and on the linear "
+                         "twin; errors, summary and figures")
+    _scenario_args(run)
+    run.add_argument("--out", type=Path, help="new run directory (default runs/NAME-TIME)")
+    run.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    est = sub.add_parser("estimate", help="the filter and smoother alone on a telemetry file")
+    est.add_argument("telemetry", type=Path, metavar="TELEMETRY.csv")
+    est.add_argument("--scenario", required=True, help="scenario (e.g. the run's scenario.yaml)")
+    est.add_argument("--out", required=True, type=Path, help="new output directory")
+    est.add_argument("--force", action="store_true")
     sub.add_parser("scenarios", help="list the bundled scenarios")
     obs = sub.add_parser("observability", help="rank tables of the paper's Section 4")
     _scenario_args(obs)
@@ -83,6 +93,39 @@ def _cmd_simulate(args) -> int:
           f"{time.perf_counter() - start:.1f} s ({result.truth.backend}); "
           f"Sun-sensor yaw on {100 * (tel.yaw_head >= 0).mean():.0f}% of samples; "
           f"wrote {args.out}/{{scenario.yaml,truth.csv,telemetry.csv}}")
+    return 0
+
+
+def _cmd_run(args) -> int:
+    from .rundir import check_out_dir, staged_run_dir
+    from .runs import run_to_directory
+
+    scenario = load_with_overrides(args)
+    out = args.out or Path("runs") / f"{scenario.name}-{time.strftime('%Y%m%dT%H%M%S')}"
+    check_out_dir(out, args.force)
+    start = time.perf_counter()
+    with staged_run_dir(out, force=args.force) as stage:
+        summary = run_to_directory(scenario, stage, start)
+    ends = ", ".join(f"{e:+.4f}" for e in summary["yaw_error_at_gap_end_deg"]) or "none"
+    sig = ", ".join(f"{e:.4f}" for e in summary["yaw_sigma_at_gap_end_deg"]) or "none"
+    print(f"{scenario.name}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; at Sun-gap "
+          f"ends {ends} deg (filter sigma {sig}; Eq. 55: "
+          f"{summary['analytic_sigma_yaw_deg']:.4f}); {time.perf_counter() - start:.1f} s")
+    print(f"figures: {out}/plots/")
+    return 0
+
+
+def _cmd_estimate(args) -> int:
+    from .loader import load_scenario
+    from .rundir import check_out_dir, staged_run_dir
+    from .runs import estimate_to_directory, read_telemetry
+
+    scenario = load_scenario(args.scenario)
+    check_out_dir(args.out, args.force)
+    cols = read_telemetry(args.telemetry, scenario)
+    with staged_run_dir(args.out, force=args.force) as stage:
+        estimate_to_directory(scenario, cols, stage)
+    print(f"wrote {args.out}/estimate.csv")
     return 0
 
 
@@ -124,6 +167,7 @@ def _cmd_covariance(args) -> int:
 
 
 COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd_plot,
+            "run": _cmd_run, "estimate": _cmd_estimate,
             "observability": _cmd_observability, "covariance": _cmd_covariance}
 
 

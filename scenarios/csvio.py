@@ -22,8 +22,11 @@ FMT = "%.10g"
 BLOCK_ROWS = 40_000
 
 
-def _format_block(block: np.ndarray) -> str:
-    fmt = ",".join([FMT] * block.shape[1]) + "\n"
+EXACT_FMT = "%.17g"  # round-trips every double: for files a computation must re-read
+
+
+def _format_block(block: np.ndarray, fmt_one: str = FMT) -> str:
+    fmt = ",".join([fmt_one] * block.shape[1]) + "\n"
     text = (fmt * block.shape[0]) % tuple(block.ravel().tolist())
     # NaN marks a missing value: an empty field.  ",nan" cannot occur otherwise.
     text = text.replace(",nan", ",")
@@ -31,8 +34,10 @@ def _format_block(block: np.ndarray) -> str:
 
 
 def write_csv(path: Path | str, columns: dict[str, np.ndarray], workers: int | None = None,
-              progress=None) -> None:
-    """Write named equal-length columns; ``progress(n_rows)`` is called per block."""
+              progress=None, exact: bool = False) -> None:
+    """Write named equal-length columns; ``progress(n_rows)`` is called per block.
+    ``exact`` writes 17 significant digits, so that reading the file back gives the
+    very same doubles."""
     names = list(columns)
     data = np.column_stack([np.asarray(columns[k], dtype=float) for k in names])
     blocks = [data[i:i + BLOCK_ROWS] for i in range(0, len(data), BLOCK_ROWS)]
@@ -42,11 +47,35 @@ def write_csv(path: Path | str, columns: dict[str, np.ndarray], workers: int | N
         if workers > 1 and len(blocks) > 1 else nullcontext()
     with open(path, "w", newline="") as fh, pool as executor:
         fh.write(",".join(names) + "\n")
-        texts = (executor.map if executor is not None else map)(_format_block, blocks)
+        fmts = [EXACT_FMT if exact else FMT] * len(blocks)
+        texts = (executor.map if executor is not None else map)(_format_block, blocks, fmts)
         for block, text in zip(blocks, texts, strict=True):
             fh.write(text)
             if progress is not None:
                 progress(len(block))
+
+
+class BackgroundWriter:
+    """Write one CSV in a forked process while the caller goes on computing.
+
+    ``wait()`` raises if the child failed; ``cancel()`` stops it (used when the run
+    fails, before its staging directory is removed)."""
+
+    def __init__(self, path: Path | str, columns: dict[str, np.ndarray]):
+        self.path = Path(path)
+        self.process = get_context("fork").Process(
+            target=write_csv, args=(self.path, columns), kwargs={"workers": 1}, daemon=True)
+        self.process.start()
+
+    def wait(self) -> None:
+        self.process.join()
+        if self.process.exitcode != 0:
+            raise OSError(f"writing {self.path.name} failed (exit {self.process.exitcode})")
+
+    def cancel(self) -> None:
+        if self.process.is_alive():
+            self.process.terminate()
+        self.process.join()
 
 
 def read_csv(path: Path | str) -> dict[str, np.ndarray]:

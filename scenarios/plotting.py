@@ -3,16 +3,27 @@
 from __future__ import annotations
 
 import os
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from estimator.consistency import chi2_bounds
+from plots.run_figures import (
+    plot_consistency,
+    plot_errors,
+    plot_telemetry_overview,
+    plot_torques,
+)
 from plots.telemetry import plot_telemetry
 from plots.truth import plot_truth
 
 from .csvio import read_csv
 from .rundir import RunDirError
+
+STATE_KEYS = ("roll", "roll_rate", "yaw", "yaw_rate", "h", "N_px", "N_pz", "N_cx", "N_cz")
 
 
 def _save(fig, path: Path) -> Path:
@@ -20,7 +31,72 @@ def _save(fig, path: Path) -> Path:
     tmp = path.with_name(f".{path.name}.tmp")
     fig.savefig(tmp, dpi=120, format="png")
     os.replace(tmp, path)
+    import matplotlib.pyplot as plt
+    plt.close(fig)
     return path
+
+
+def _draw(job) -> Path:
+    function, args, path = job
+    return _save(function(*args), path)
+
+
+def _draw_all(jobs) -> list[Path]:
+    """Draw and save figures, two at a time on two cores (rendering dominates)."""
+    if len(jobs) < 2 or (os.cpu_count() or 1) < 2:
+        return [_draw(j) for j in jobs]
+    with ProcessPoolExecutor(2, mp_context=get_context("fork")) as pool:
+        return list(pool.map(_draw, jobs))
+
+
+def _title(scenario: dict) -> str:
+    return (f"{scenario['name']} — seed {scenario['seed']}, epoch {scenario['epoch_utc']}, "
+            f"dynprop {scenario.get('dynprop_version') or '?'}")
+
+
+def plot_run_figures(run_dir: Path, telemetry: dict | None = None) -> list[Path]:
+    """The four `dynprop run` figures from comparison.npz and telemetry.csv."""
+    run_dir = Path(run_dir)
+    scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
+    title = _title(scenario)
+    c = dict(np.load(run_dir / "comparison.npz"))
+    tel = telemetry if telemetry is not None else read_csv(run_dir / "telemetry.csv")
+    t = c["t_s"]
+    gap = c["yaw_present"] < 0.5
+    col = {k: i for i, k in enumerate(STATE_KEYS)}
+
+    def series(name, unit):
+        i = col[name]
+        return {"unit": unit, "real": c["err_real"][:, i], "linear": c["err_linear"][:, i],
+                "sigma": c["sigma"][:, i], "smoothed": c["err_smoothed"][:, i]}
+
+    out = run_dir / "plots"
+    out.mkdir(exist_ok=True)
+    torques = ("N_px", "N_pz", "N_cx", "N_cz")
+    nis = {m: c["nis_real"][:, i] for i, m in enumerate(("roll", "yaw", "h"))}
+    euler = c["true_euler_deg"]
+    wheels = {k: tel[k] for k in tel if k.startswith("wheel") and k.endswith("_rpm")}
+    def held(a):
+        # NEES is stored every 10th sample; hold each value until the next (drawing only).
+        idx = np.where(np.isfinite(a), np.arange(len(a)), 0)
+        return a[np.maximum.accumulate(idx)]
+
+    jobs = [
+        (plot_errors, (t, gap, {"roll": series("roll", "deg"), "yaw": series("yaw", "deg"),
+                                "h": series("h", "N m s")}, title), out / "errors.png"),
+        (plot_consistency, (t, held(c["nees_real"]), held(c["nees_linear"]), len(STATE_KEYS),
+                            chi2_bounds(len(STATE_KEYS)), nis, chi2_bounds(1), title),
+         out / "consistency.png"),
+        (plot_torques, (t, gap, {k: c["x_real"][:, col[k]] for k in torques},
+                        {k: c["truth_model"][:, col[k]] for k in torques},
+                        {k: c["sigma"][:, col[k]] for k in torques}, title),
+         out / "torques.png"),
+        (plot_telemetry_overview,
+         (t, {"roll": tel["roll_deg"], "pitch": tel["pitch_deg"], "yaw": tel["yaw_deg"]},
+          {"roll": euler[:, 1], "pitch": euler[:, 2], "yaw": euler[:, 0]}, wheels, gap, title),
+         out / "telemetry_overview.png"),
+    ]
+    return _draw_all(jobs)
 
 
 def plot_run(run_dir: Path) -> list[Path]:
@@ -48,6 +124,8 @@ def plot_run(run_dir: Path) -> list[Path]:
         tel["t_s"], truth["yaw_deg"], tel["yaw_deg"], tel["yaw_sigma_deg"], sun_head, heads,
         tel["roll_deg"] - truth["roll_deg"], tel["pitch_deg"] - truth["pitch_deg"],
         ~np.isfinite(tel["yaw_deg"]), f"Telemetry: {title}"), out / "telemetry.png"))
+    if (run_dir / "comparison.npz").is_file():
+        written += plot_run_figures(run_dir, tel)
     import matplotlib.pyplot as plt
     plt.close("all")
     return written

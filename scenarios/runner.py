@@ -9,6 +9,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from sim.telemetry import Telemetry, make_telemetry
 from sim.truth import TruthResult, simulate_truth
 
@@ -41,11 +43,19 @@ def simulate(scenario: Scenario, run: int = 0, model=None) -> Simulation:
     return Simulation(scenario, truth, tel, tuple(h.name for h in suite.sun_heads))
 
 
-def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = None) -> None:
-    """scenario.yaml (resolved), truth.csv and telemetry.csv into ``stage``."""
+def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = None,
+                     truth_writer=None) -> dict[str, np.ndarray]:
+    """scenario.yaml (resolved), truth.csv and telemetry.csv into ``stage``; returns
+    the telemetry columns exactly as written (17 digits: a re-read gives the same
+    doubles, so `dynprop estimate` on the file reproduces a run's filter).  With
+    ``truth_writer`` (a callable taking path and columns) truth.csv is handed off."""
     (stage / "scenario.yaml").write_text(resolved_yaml(sim.scenario))
     truth = truth_columns(sim.truth, sim.telemetry.sun_visible)
     tel = telemetry_columns(sim.telemetry, sim.head_names)
+    if truth_writer is not None:
+        truth_writer(stage / "truth.csv", truth)
+        write_csv(stage / "telemetry.csv", tel, exact=True)
+        return tel
     rows = len(sim.truth.t_s)
     if show_progress is None:
         # A bar only on a terminal, and only when writing takes more than a moment.
@@ -58,7 +68,8 @@ def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = 
     try:
         update = bar.update if bar is not None else None
         write_csv(stage / "truth.csv", truth, progress=update)
-        write_csv(stage / "telemetry.csv", tel, progress=update)
+        write_csv(stage / "telemetry.csv", tel, progress=update, exact=True)
     finally:
         if bar is not None:
             bar.close()
+    return tel

@@ -246,8 +246,35 @@ class ProcessNoise(_Section):
     q_cz: float = Field(3e-18, ge=0, description="constant yaw torque random walk ((N m)²/s)")
 
 
+class InitialSigma(_Section):
+    """The filter's initial 1σ per state (its initial estimate is zero)."""
+
+    roll_deg: float = Field(0.05, gt=0, description="roll (deg)")
+    roll_rate_degps: float = Field(1e-3, gt=0, description="roll rate (deg/s)")
+    yaw_deg: float = Field(0.5, gt=0, description="yaw (deg)")
+    yaw_rate_degps: float = Field(1e-3, gt=0, description="yaw rate (deg/s)")
+    h_Nms: float = Field(0.05, gt=0, description="yaw wheel momentum (N m s)")
+    N_px_Nm: float = Field(5e-6, gt=0, description="periodic roll torque (N m)")
+    N_pz_Nm: float = Field(5e-6, gt=0, description="periodic yaw torque (N m)")
+    N_cx_Nm: float = Field(5e-6, gt=0, description="constant roll torque (N m)")
+    N_cz_Nm: float = Field(5e-6, gt=0, description="constant yaw torque (N m)")
+
+
+class ModelTorques(_Section):
+    """The modelled environment torques N_x*, N_z* of Eq. 9 (may differ from the truth)."""
+
+    roll_Nm: float = Field(0.0, description="N_x*, constant (N m)")
+    yaw_Nm: float = Field(0.0, description="N_z*, constant (N m)")
+
+
 class Estimator(_Section):
     process_noise: ProcessNoise = Field(default_factory=ProcessNoise)
+    initial_sigma: InitialSigma = Field(default_factory=InitialSigma)
+    model_torques: ModelTorques = Field(default_factory=ModelTorques)
+    wheel_torque_window_s: float = Field(20.0, gt=0, le=600, description="Savitzky–Golay "
+                                         "window for N_w* = ḣ from the tachometers (s)")
+    sun_gap_min_h: float = Field(4.0, gt=0, description="a yaw outage at least this long "
+                                 "counts as a Sun gap in the summary (h)")
 
 
 class Scenario(_Section):

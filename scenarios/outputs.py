@@ -1,0 +1,141 @@
+"""What `dynprop run` and `dynprop estimate` write: estimate.csv, summary.json and
+comparison.npz (the full-resolution series the figures are drawn from)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from estimator.consistency import chi2_bounds, fraction_inside, nees, nis
+from estimator.covariance import approx_yaw_variance
+from estimator.kalman import unpack
+from estimator.model import N_STATES, R, Y
+
+from . import __version__
+from .schema import Scenario
+
+RAD2DEG = 180.0 / np.pi
+# Estimate columns: state name with its unit, and the factor from model units
+# (ṙ/ω_n and ẏ/ω_n are written as rates in deg/s).
+STATE_COLUMNS = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms",
+                 "N_px_Nm", "N_pz_Nm", "N_cx_Nm", "N_cz_Nm")
+
+
+def display_factors(omega_n: float) -> np.ndarray:
+    return np.array([RAD2DEG, RAD2DEG * omega_n, RAD2DEG, RAD2DEG * omega_n, 1, 1, 1, 1, 1])
+
+
+def estimate_columns(t_s, x, sigma, omega_n: float) -> dict[str, np.ndarray]:
+    f = display_factors(omega_n)
+    cols = {"t_s": t_s}
+    for k, name in enumerate(STATE_COLUMNS):
+        cols[name] = x[:, k] * f[k]
+    for k, name in enumerate(STATE_COLUMNS):
+        cols[f"sigma_{name}"] = sigma[:, k] * abs(f[k])
+    return cols
+
+
+def sun_gaps(yaw_present: np.ndarray, dt_s: float, min_hours: float) -> list[tuple[int, int]]:
+    """(first missing, first present again) index pairs of yaw outages ≥ ``min_hours``;
+    a gap still open at the end of the run has end = N."""
+    missing = ~np.asarray(yaw_present, dtype=bool)
+    edges = np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
+    pairs = list(zip(edges[::2], edges[1::2], strict=True))
+    return [(a, b) for a, b in pairs if (b - a) * dt_s >= min_hours * 3600]
+
+
+NEES_STRIDE = 10  # NEES on every 10th sample (5 s apart): plenty for means and figures
+
+
+def nees_series(runs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sample indices and NEES of the real and linear runs, unpacking only the
+    covariances used."""
+    idx = np.arange(0, len(runs.real.x), NEES_STRIDE)
+    real = nees(runs.real.x[idx], unpack(runs.real.P_packed[idx]), runs.truth_model[idx])
+    lin = nees(runs.linear.x[idx], unpack(runs.linear.P_packed[idx]), runs.twin_model[idx])
+    return idx, real, lin
+
+
+def _rms(a) -> float:
+    return float(np.sqrt(np.nanmean(np.square(a))))
+
+
+def summarize(s: Scenario, runs, t_s, yaw_present, elapsed_s: float, nees_data) -> dict:
+    """summary.json: the figures of the run (DESIGN.md section 6 keys included)."""
+    p = runs.params
+    err = runs.real.x - runs.truth_model
+    err_lin = runs.linear.x - runs.twin_model
+    sig = runs.real.sigma
+    dt = s.sample_interval_s
+    gaps = sun_gaps(yaw_present, dt, s.estimator.sun_gap_min_h)
+    ends = [b for _, b in gaps if b < len(t_s)]
+    q = 0.5 * (s.estimator.process_noise.q_x + s.estimator.process_noise.q_z)
+    eq55 = float(np.sqrt(approx_yaw_variance(q, p.H_Nms, p.omega0_radps))) * RAD2DEG
+    _, n_real, n_lin = nees_data
+    nees_b = chi2_bounds(N_STATES, 1)
+    nis_b = chi2_bounds(1, 1)
+    summary = {
+        "scenario": s.name, "seed": s.seed, "epoch_utc": s.epoch_utc,
+        "duration_s": s.duration_s, "dynprop_version": __version__,
+        "backend": runs.real.backend, "wall_s": round(elapsed_s, 3),
+        "yaw_error_rms_deg": _rms(err[:, Y]) * RAD2DEG,
+        "yaw_error_rms_linear_deg": _rms(err_lin[:, Y]) * RAD2DEG,
+        "roll_error_rms_deg": _rms(err[:, R]) * RAD2DEG,
+        "h_error_rms_Nms": _rms(err[:, 4]),
+        "yaw_error_rms_smoothed_deg": _rms(runs.smoothed.x[:, Y] - runs.truth_model[:, Y])
+        * RAD2DEG,
+        "sun_gaps_h": [[a * dt / 3600, b * dt / 3600] for a, b in gaps],
+        "yaw_error_at_gap_end_deg": [float(err[b, Y] * RAD2DEG) for b in ends],
+        "yaw_error_linear_at_gap_end_deg": [float(err_lin[b, Y] * RAD2DEG) for b in ends],
+        "yaw_sigma_at_gap_end_deg": [float(sig[b, Y] * RAD2DEG) for b in ends],
+        "yaw_within_3sigma_at_gap_ends": bool(all(abs(err[b, Y]) <= 3 * sig[b, Y]
+                                                  for b in ends)),
+        "analytic_sigma_yaw_deg": eq55,
+        "last_gap_end_sigma_over_eq55": (float(sig[ends[-1], Y] * RAD2DEG / eq55)
+                                         if ends else None),
+        "nonlinear_vs_linear": {
+            name: {"rms_real": _rms(err[:, k]) * f, "rms_linear": _rms(err_lin[:, k]) * f,
+                   "rms_difference": _rms(err[:, k] - err_lin[:, k]) * f,
+                   "max_abs_difference": float(np.max(np.abs(err[:, k] - err_lin[:, k])) * f)}
+            for name, k, f in (("roll_deg", R, RAD2DEG), ("yaw_deg", Y, RAD2DEG),
+                               ("h_Nms", 4, 1.0))},
+        "nees_mean": float(np.mean(n_real)), "nees_mean_linear": float(np.mean(n_lin)),
+        "nees_dof": N_STATES, "nees_bounds_95_per_sample": nees_b,
+        "nees_fraction_inside_95": fraction_inside(n_real, nees_b),
+        "nees_fraction_inside_95_linear": fraction_inside(n_lin, nees_b),
+        "nis_mean": {m: float(np.nanmean(nis(runs.real.innovations[:, i],
+                                             runs.real.innovation_var[:, i])))
+                     for i, m in enumerate(("roll", "yaw", "h"))},
+        "nis_mean_linear": {m: float(np.nanmean(nis(runs.linear.innovations[:, i],
+                                                    runs.linear.innovation_var[:, i])))
+                            for i, m in enumerate(("roll", "yaw", "h"))},
+        "nis_bounds_95_per_sample": nis_b,
+    }
+    return summary
+
+
+def comparison_arrays(runs, t_s, yaw_present, nees_data) -> dict[str, np.ndarray]:
+    """Everything the run figures need, full resolution, float32 (drawing only)."""
+    f = display_factors(runs.params.omega_n_radps)
+    idx, real, lin = nees_data
+    n_real = np.full(len(t_s), np.nan)
+    n_lin = np.full(len(t_s), np.nan)
+    n_real[idx], n_lin[idx] = real, lin
+    out = {
+        "t_s": t_s, "yaw_present": yaw_present.astype(np.float32),
+        "err_real": (runs.real.x - runs.truth_model) * f,
+        "err_linear": (runs.linear.x - runs.twin_model) * f,
+        "err_smoothed": (runs.smoothed.x - runs.truth_model) * f,
+        "sigma": runs.real.sigma * np.abs(f),
+        "x_real": runs.real.x * f, "truth_model": runs.truth_model * f,
+        "nees_real": n_real, "nees_linear": n_lin,
+        "nis_real": nis(runs.real.innovations, runs.real.innovation_var),
+        "true_euler_deg": runs.sim.truth.euler_rad * RAD2DEG,  # yaw, roll, pitch
+    }
+    return {k: (v if k == "t_s" else np.asarray(v, dtype=np.float32)) for k, v in out.items()}
+
+
+def write_summary(path: Path, summary: dict) -> None:
+    path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")

@@ -1,0 +1,221 @@
+"""`dynprop run`: truth → telemetry → filter and smoother, and the linear twin.
+
+The linear twin is the paper's model (Eq. 11) propagated exactly (Φ, Γ) from the
+same initial deviation, under the same torques, and sensed with the same noise
+draws by the same sensor code.  Filtering both with the identical filter
+separates what the nonlinearities and the model's approximations cost
+(real − linearized) from what the sensors and process noise cost (linearized).
+
+Torques in model coordinates: the true external roll and yaw torques, less the
+estimator's modelled N_x*, N_z*, are fitted over the run with the model's own
+form (constant + an ω0 sinusoid, Eqs. 9 and 18); the fit is the "true" value of
+the torque states N_c, N_p, and the residual drives the twin as an input.
+Gravity gradient is not an external torque here: the linear model carries it
+(in its approximated form) in F.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from types import SimpleNamespace
+
+import casadi as ca
+import numpy as np
+
+from estimator import model as em
+from estimator.kalman import FilterResult, SmootherResult, kalman_filter, rts_smoother
+from estimator.preprocess import SensorNoise, prepare
+from estimator.transition import discretize
+from rollout.chunks import ChunkedRollout
+from sim.frames import dcm_from_euler312
+from sim.telemetry import make_telemetry
+
+from . import build
+from .runner import Simulation, simulate
+from .schema import Scenario
+
+DEG = np.pi / 180.0
+EXTERNAL = ("solar", "magnetic", "magnetic_control", "external")
+
+
+def euler_rates(euler_rad: np.ndarray, w_br: np.ndarray) -> np.ndarray:
+    """(ψ̇, φ̇, θ̇) from ω_BR (body) for C_BR = R2(θ)R1(φ)R3(ψ):
+    ω = (cθ φ̇ − sθ cφ ψ̇, θ̇ + sφ ψ̇, sθ φ̇ + cθ cφ ψ̇)."""
+    _, roll, pitch = euler_rad.T
+    cth, sth, cph, sph = np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
+    roll_dot = cth * w_br[:, 0] + sth * w_br[:, 2]
+    yaw_dot = (-sth * w_br[:, 0] + cth * w_br[:, 2]) / cph
+    pitch_dot = w_br[:, 1] - sph * yaw_dot
+    return np.column_stack([yaw_dot, roll_dot, pitch_dot])
+
+
+def project_torques(t_s, nx, nz, w0):
+    """Least-squares fit N_x = N_cx + c0 a + s0 b, N_z = N_cz − s0 a + c0 b (Eqs. 9, 18).
+    Returns the torque-state histories (N, 4) [N_px, N_pz, N_cx, N_cz] and residuals."""
+    c, s = np.cos(w0 * t_s), np.sin(w0 * t_s)
+    one, zero = np.ones_like(c), np.zeros_like(c)
+    # Unknowns (a, b, N_cx, N_cz).
+    A = np.vstack([np.column_stack([c, s, one, zero]), np.column_stack([-s, c, zero, one])])
+    coef = np.linalg.lstsq(A, np.concatenate([nx, nz]), rcond=None)[0]
+    a, b, ncx, ncz = coef
+    states = np.column_stack([c * a + s * b, -s * a + c * b, ncx * one, ncz * one])
+    return states, nx - states[:, 0] - ncx, nz - states[:, 1] - ncz
+
+
+@lru_cache(maxsize=2)
+def _linear_engine() -> ChunkedRollout:
+    """x_{k+1} = Φ x_k + Γ u_k compiled once (Φ, Γ as parameters)."""
+    x, u = ca.SX.sym("x", em.N_STATES), ca.SX.sym("u", em.N_STATES)
+    p = ca.SX.sym("p", 2 * em.N_STATES**2)
+    n2 = em.N_STATES**2
+    phi = ca.reshape(p[:n2], em.N_STATES, em.N_STATES)
+    gam = ca.reshape(p[n2:], em.N_STATES, em.N_STATES)
+    step = ca.Function("dynprop_linear", [x, u, p], [phi @ x + gam @ u, x])
+    return ChunkedRollout(step)
+
+
+def propagate_linear(disc, x0, u) -> np.ndarray:
+    """The linear model's states at every sample (N, 9), exact for ZOH inputs."""
+    p = np.concatenate([np.asarray(disc.Phi).ravel(order="F"),
+                        np.asarray(disc.Gamma).ravel(order="F")])
+    _, aux = _linear_engine().run(np.asarray(x0, float), [u], p)
+    return aux
+
+
+@dataclass(frozen=True)
+class TwoRuns:
+    """Everything a run directory is made of."""
+
+    sim: Simulation
+    twin_telemetry: object
+    params: em.ModelParams
+    truth_model: np.ndarray     # nonlinear truth in model coordinates (N, 9)
+    twin_model: np.ndarray      # linear twin's states (N, 9)
+    real: FilterResult
+    linear: FilterResult
+    smoothed: SmootherResult
+    yaw_factors: np.ndarray
+
+
+def sensor_noise(s: Scenario) -> SensorNoise:
+    c = s.sensors
+    dss = c.sun.dss
+    return SensorNoise(c.earth.noise_deg, c.earth.quantum_deg, c.tachometer.noise_3sigma_rpm,
+                       c.tachometer.quantum_rpm,
+                       float(np.hypot(dss.noise_deg, dss.quantum_deg / np.sqrt(12))))
+
+
+def initial_prior(s: Scenario, params: em.ModelParams) -> tuple[np.ndarray, np.ndarray]:
+    """Zero initial estimate, diagonal P0 from ``estimator.initial_sigma`` (model units)."""
+    i, wn = s.estimator.initial_sigma, abs(params.omega_n_radps)
+    sig = [i.roll_deg * DEG, i.roll_rate_degps * DEG / wn, i.yaw_deg * DEG,
+           i.yaw_rate_degps * DEG / wn, i.h_Nms, i.N_px_Nm, i.N_pz_Nm, i.N_cx_Nm, i.N_cz_Nm]
+    return np.zeros(em.N_STATES), np.diag(np.square(sig))
+
+
+def yaw_factors(s: Scenario) -> np.ndarray:
+    sc = build.build_spacecraft(s)
+    return sc.wheel_inertias * sc.wheel_axes[:, 2]
+
+
+def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
+    """Per-sample factor on the ground yaw variance for the filter.
+
+    A head's quantisation error is not white: the Sun's angle in the head moves
+    at about ω0, so the error stays put for the q/ω0 it takes to cross a quantum
+    (30 s for the 0.125° DSS, 58 samples).  Treating those samples as independent
+    made the filter's yaw σ several times too small on both the real and the
+    linear run (normalised yaw error variance ≈ 17).  The quantisation share of
+    the variance is therefore counted once per crossing: var·(n² + q²/12·N)/(n² +
+    q²/12) with N = max(1, q/(ω0 Δt)); about 57 for the DSS, 1.002 for a CASS,
+    whose 1° noise is white.  Heads are the telemetry's ``sun_head`` indices."""
+    w0 = build.orbit(s).rate_radps
+    heads = [s.sensors.sun.dss, s.sensors.sun.cass1, s.sensors.sun.cass2]
+    factors = []
+    for h in heads:
+        quant = h.quantum_deg**2 / 12
+        n_corr = max(1.0, h.quantum_deg * DEG / (w0 * s.sample_interval_s))
+        factors.append((h.noise_deg**2 + quant * n_corr) / (h.noise_deg**2 + quant))
+    idx = np.asarray(sun_head, dtype=float)
+    out = np.ones(len(idx))
+    ok = np.isfinite(idx) & (idx >= 0)
+    out[ok] = np.asarray(factors)[idx[ok].astype(int)]
+    return out
+
+
+def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
+                     sun_head=None) -> tuple[FilterResult, np.ndarray]:
+    """Preprocess telemetry arrays and run the filter; returns the result and u."""
+    e = s.estimator
+    if yaw_sigma is not None and sun_head is not None:
+        yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
+    inputs = prepare(params, s.sample_interval_s, roll, yaw, speeds, yaw_factors(s),
+                     sensor_noise(s), yaw_sigma, e.model_torques.roll_Nm,
+                     e.model_torques.yaw_Nm, e.wheel_torque_window_s)
+    x0, P0 = initial_prior(s, params)
+    return kalman_filter(inputs.measurements, disc, x0, P0, u=inputs.u), inputs.u
+
+
+REQUIRED_TELEMETRY = ("t_s", "roll_deg", "pitch_deg", "yaw_deg", "wheel1_rpm", "wheel2_rpm")
+
+
+def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]):
+    """(roll, yaw, wheel speeds, yaw σ or None, Sun head or None) in SI from the
+    columns of a telemetry.csv; the single path used by `run` and `estimate`."""
+    n_wheels = len(yaw_factors(s))
+    speeds = np.column_stack([cols[f"wheel{i + 1}_rpm"] for i in range(n_wheels)]) \
+        * (np.pi / 30.0)
+    sigma = cols["yaw_sigma_deg"] * DEG if "yaw_sigma_deg" in cols else None
+    head = cols.get("sun_head")
+    return cols["roll_deg"] * DEG, cols["yaw_deg"] * DEG, speeds, sigma, head
+
+
+def run_scenario(s: Scenario, sim: Simulation | None = None,
+                 telemetry_columns: dict[str, np.ndarray] | None = None) -> TwoRuns:
+    """Both runs.  ``telemetry_columns`` (telemetry.csv read back) makes the real
+    filter see exactly the file's values, so that ``dynprop estimate`` on that file
+    reproduces the estimates bit for bit."""
+    sim = sim or simulate(s)
+    truth, tel, dt = sim.truth, sim.telemetry, s.sample_interval_s
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, dt)
+    wn, w0 = params.omega_n_radps, params.omega0_radps
+
+    # Nonlinear truth in the model's coordinates.
+    rates = euler_rates(truth.euler_rad, truth.w_br_radps)
+    ext = sum(truth.torques[k] for k in EXTERNAL)
+    mt = s.estimator.model_torques
+    torque_states, res_x, res_z = project_torques(truth.t_s, ext[:, 0] - mt.roll_Nm,
+                                                  ext[:, 2] - mt.yaw_Nm, w0)
+    truth_model = np.column_stack([truth.roll_rad, rates[:, 1] / wn, truth.yaw_rad,
+                                   rates[:, 0] / wn, truth.h_Nms, torque_states])
+
+    # The linear twin: same start, same torques (fit in the states, residual and the
+    # true wheel torque as inputs; N_w averaged over each step is exact for h).
+    nw_true = np.append(np.diff(truth.h_Nms) / dt, 0.0)
+    u_twin = em.input_vector(params, mt.roll_Nm + res_x, mt.yaw_Nm + res_z, nw_true)
+    twin = propagate_linear(disc, truth_model[0], u_twin)
+    k = yaw_factors(s)
+    speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms, k / (k @ k))
+    c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)
+    twin_truth = SimpleNamespace(
+        t_s=truth.t_s, roll_rad=twin[:, em.R], pitch_rad=truth.pitch_rad,
+        wheel_speeds_radps=speeds, shadow=truth.shadow, sun_orbit_frame=truth.sun_orbit_frame,
+        sun_body=np.einsum("nij,nj->ni", c_br, truth.sun_orbit_frame))
+    suite = build.build_sensors(s)
+    # Fresh generators from the same seed: the twin's noise draws equal the real ones.
+    twin_tel = make_telemetry(twin_truth, suite, build.streams(s.seed),
+                              s.sensors.sun.min_sun_separation_deg)
+
+    if telemetry_columns is None:
+        head = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
+        measured = (tel.roll_rad, tel.yaw_rad, tel.wheel_speeds_radps, tel.yaw_sigma_rad, head)
+    else:
+        measured = telemetry_inputs(s, telemetry_columns)
+    real, u = filter_telemetry(s, params, disc, *measured)
+    twin_head = np.where(twin_tel.yaw_head >= 0, twin_tel.yaw_head, np.nan)
+    linear, _ = filter_telemetry(s, params, disc, twin_tel.roll_rad, twin_tel.yaw_rad,
+                                 twin_tel.wheel_speeds_radps, twin_tel.yaw_sigma_rad, twin_head)
+    smoothed = rts_smoother(real, disc, u=u)
+    return TwoRuns(sim, twin_tel, params, truth_model, twin, real, linear, smoothed, k)

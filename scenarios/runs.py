@@ -1,0 +1,106 @@
+"""Run directories of `dynprop run` and `dynprop estimate` (DESIGN.md section 6)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from estimator.kalman import rts_smoother
+from estimator.transition import discretize
+
+from . import build
+from .csvio import BackgroundWriter, read_csv, write_csv
+from .outputs import (
+    comparison_arrays,
+    estimate_columns,
+    nees_series,
+    summarize,
+    write_summary,
+)
+from .pipeline import REQUIRED_TELEMETRY, filter_telemetry, run_scenario, telemetry_inputs
+from .rundir import RunDirError
+from .runner import simulate, write_simulation
+from .schema import Scenario
+
+
+def run_to_directory(s: Scenario, stage: Path, start: float | None = None) -> dict:
+    """Everything of one `dynprop run` into ``stage``; returns the summary."""
+    start = time.perf_counter() if start is None else start
+    sim = simulate(s)
+    writers = []
+
+    def in_background(path, columns):
+        writers.append(BackgroundWriter(path, columns))
+
+    try:
+        # truth.csv is written by a second process while the filters run; the filter
+        # sees the telemetry exactly as written, so `dynprop estimate` reproduces it.
+        written = write_simulation(stage, sim, truth_writer=in_background)
+        summary = _estimate_and_report(s, sim, written, stage, start, in_background)
+        for w in writers:
+            w.wait()
+    except BaseException:
+        for w in writers:
+            w.cancel()
+        raise
+    summary["wall_s"] = round(time.perf_counter() - start, 3)
+    write_summary(stage / "summary.json", summary)
+    return summary
+
+
+def _estimate_and_report(s: Scenario, sim, written, stage: Path, start: float,
+                         in_background) -> dict:
+    runs = run_scenario(s, sim, written)
+    t = sim.truth.t_s
+    present = np.isfinite(written["yaw_deg"])
+    in_background(stage / "estimate.csv",
+                  estimate_columns(t, runs.real.x, runs.real.sigma, runs.params.omega_n_radps))
+    nees_data = nees_series(runs)
+    np.savez(stage / "comparison.npz", **comparison_arrays(runs, t, present, nees_data))
+    summary = summarize(s, runs, t, present, time.perf_counter() - start, nees_data)
+    from .plotting import plot_run_figures
+    plot_run_figures(stage, written)
+    return summary
+
+
+def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
+    """A telemetry CSV with at least the contract columns; one-line errors otherwise."""
+    path = Path(path)
+    if not path.is_file():
+        raise RunDirError(f"{path}: no such telemetry file")
+    try:
+        cols = read_csv(path)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
+    missing = [c for c in REQUIRED_TELEMETRY if c not in cols]
+    n_wheels = len(build.yaw_factors(s))
+    missing += [f"wheel{i + 1}_rpm" for i in range(2, n_wheels) if f"wheel{i + 1}_rpm" not in cols]
+    if missing:
+        raise RunDirError(f"{path}: missing column(s) {', '.join(missing)}")
+    t = cols["t_s"]
+    if len(t) < 2:
+        raise RunDirError(f"{path}: needs at least two samples")
+    for name in ("t_s", "roll_deg", *(f"wheel{i + 1}_rpm" for i in range(n_wheels))):
+        bad = ~np.isfinite(cols[name])
+        if bad.any():
+            raise RunDirError(f"{path}: column {name} has a missing or non-numeric value in "
+                              f"row {int(np.argmax(bad)) + 2}")
+    steps = np.diff(t)
+    if not np.allclose(steps, s.sample_interval_s, rtol=1e-6, atol=1e-6):
+        k = int(np.argmax(~np.isclose(steps, s.sample_interval_s, rtol=1e-6, atol=1e-6)))
+        raise RunDirError(f"{path}: t_s must advance by the scenario's sample_interval_s "
+                          f"({s.sample_interval_s} s); row {k + 3} steps {steps[k]:g} s")
+    return cols
+
+
+def estimate_to_directory(s: Scenario, cols: dict[str, np.ndarray], stage: Path) -> None:
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, s.sample_interval_s)
+    real, u = filter_telemetry(s, params, disc, *telemetry_inputs(s, cols))
+    write_csv(stage / "estimate.csv",
+              estimate_columns(cols["t_s"], real.x, real.sigma, params.omega_n_radps))
+    smoothed = rts_smoother(real, disc, u=u)
+    write_csv(stage / "smoothed.csv",
+              estimate_columns(cols["t_s"], smoothed.x, smoothed.sigma, params.omega_n_radps))
