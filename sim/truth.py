@@ -247,7 +247,9 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
         raise ValueError("dt_s must be positive")
     n = spacecraft.n_wheels
     n_samples = int(np.floor(duration_s / dt_s + 1e-9)) + 1
-    t_s = np.arange(n_samples) * dt_s
+    # Sample times rounded to the nanosecond: exact decimals (4.608, not
+    # 4.6080000000000005), so every file writes the same t_s to any precision.
+    t_s = np.round(np.arange(n_samples) * dt_s, 9)
     sigma = environment.ripple.step_sigma_Nm(dt_s)
     if sigma > 0:
         if rng is None:
