@@ -21,8 +21,7 @@ test: $(STAMP)
 	PYTHONWARNINGS=error $(BIN)/python -m pytest
 
 demo: $(STAMP)
-	$(BIN)/dynprop simulate goes_next_equinox --out $(DEMO_DIR)
-	$(BIN)/dynprop plot $(DEMO_DIR)
+	$(BIN)/dynprop run goes_next_equinox --out $(DEMO_DIR)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py

@@ -94,6 +94,12 @@ def main() -> None:
     x0, P0 = np.zeros(9), np.diag([1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12])
     report("filter_s_per_day", median_time(lambda: kalman_filter(meas, disc, x0, P0),
                                            repeats=5), "s")
+    with tempfile.TemporaryDirectory() as tmp:
+        def full_run():
+            subprocess.run([str(Path(sys.executable).with_name("dynprop")), "run",
+                            "goes_next_equinox", "--out", f"{tmp}/run", "--force"],
+                           check=True, capture_output=True)
+        report("run_2day_wall_s", median_time(full_run, repeats=3), "s")
     k = 5000  # the plain-numpy loop, for comparison, scaled to a day
     part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,
                         1.5e-7)
