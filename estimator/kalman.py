@@ -185,8 +185,26 @@ class Measurements:
         return np.where(np.isfinite(r), r, 1.0)
 
 
+class _PackedHistory:
+    """σ and P views of a (N, 45) packed covariance history."""
+
+    P_packed: np.ndarray
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """1σ of each state, (N, 9)."""
+        return np.sqrt(self.P_packed[:, _DIAG])
+
+    @property
+    def P(self) -> np.ndarray:
+        return unpack(self.P_packed)
+
+
+_DIAG = [k for k, (i, j) in enumerate(zip(*_IU, strict=True)) if i == j]
+
+
 @dataclass(frozen=True)
-class FilterResult:
+class FilterResult(_PackedHistory):
     """A-posteriori history at each sample, innovations ν and their variances S
     (columns roll, yaw, h; NaN where no update), and the prior after the last step."""
 
@@ -198,30 +216,11 @@ class FilterResult:
     P_next: np.ndarray
     backend: str
 
-    @property
-    def sigma(self) -> np.ndarray:
-        """1σ of each state, (N, 9)."""
-        diag = [k for k, (i, j) in enumerate(zip(*_IU, strict=True)) if i == j]
-        return np.sqrt(self.P_packed[:, diag])
-
-    @property
-    def P(self) -> np.ndarray:
-        return unpack(self.P_packed)
-
 
 @dataclass(frozen=True)
-class SmootherResult:
+class SmootherResult(_PackedHistory):
     x: np.ndarray
     P_packed: np.ndarray
-
-    @property
-    def sigma(self) -> np.ndarray:
-        diag = [k for k, (i, j) in enumerate(zip(*_IU, strict=True)) if i == j]
-        return np.sqrt(self.P_packed[:, diag])
-
-    @property
-    def P(self) -> np.ndarray:
-        return unpack(self.P_packed)
 
 
 def _inputs(u, n) -> np.ndarray:

@@ -23,30 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import savgol_filter
 
+from .covariance import SensorSpecs, roll_variance, tach_variance, yaw_variance
 from .kalman import Measurements
 from .model import ModelParams, input_vector
 
-RPM = 2.0 * np.pi / 60.0
-DEG = np.pi / 180.0
-
-
-@dataclass(frozen=True)
-class SensorNoise:
-    """What the ground assumes about its sensors (degrees and rpm, as specified)."""
-
-    roll_noise_deg: float = 0.01
-    roll_quantum_deg: float = 0.01
-    tach_noise_3sigma_rpm: float = 0.0978
-    tach_quantum_rpm: float = 0.0163
-    yaw_sigma_deg: float = 0.0375  # used only where a file gives no per-sample yaw σ
-
-    @property
-    def var_roll(self) -> float:
-        return (self.roll_noise_deg**2 + self.roll_quantum_deg**2 / 12) * DEG**2
-
-    @property
-    def var_tach(self) -> float:
-        return ((self.tach_noise_3sigma_rpm / 3) ** 2 + self.tach_quantum_rpm**2 / 12) * RPM**2
+PAPER_SENSORS = SensorSpecs()  # Sections 2.1 and 2.3
 
 
 def yaw_momentum(wheel_speeds_radps: np.ndarray, yaw_factors: np.ndarray) -> np.ndarray:
@@ -73,7 +54,7 @@ class FilterInputs:
 
 
 def prepare(params: ModelParams, dt_s: float, roll_rad, yaw_rad, wheel_speeds_radps,
-            yaw_factors, noise: SensorNoise = SensorNoise(), yaw_sigma_rad=None,
+            yaw_factors, sensors: SensorSpecs = PAPER_SENSORS, yaw_sigma_rad=None,
             Nx_model_Nm=0.0, Nz_model_Nm=0.0, nw_window_s: float = 20.0) -> FilterInputs:
     """Measurements and inputs for ``kalman_filter`` from telemetry arrays."""
     roll = np.asarray(roll_rad, dtype=float)
@@ -85,12 +66,12 @@ def prepare(params: ModelParams, dt_s: float, roll_rad, yaw_rad, wheel_speeds_ra
     if not (np.all(np.isfinite(roll)) and np.all(np.isfinite(speeds))):
         raise ValueError("roll and wheel speeds must be present at every sample")
     h = yaw_momentum(speeds, k)
-    if yaw_sigma_rad is None:
-        var_yaw = (noise.yaw_sigma_deg * DEG) ** 2
+    if yaw_sigma_rad is None:  # a file without per-sample σ: the Sun sensor's spec
+        var_yaw = yaw_variance(sensors)
     else:
         var_yaw = np.where(np.isfinite(yaw), np.asarray(yaw_sigma_rad, dtype=float) ** 2, 1.0)
-    meas = Measurements(roll, yaw, h, noise.var_roll, var_yaw,
-                        float(np.sum(k**2)) * noise.var_tach)
+    meas = Measurements(roll, yaw, h, roll_variance(sensors), var_yaw,
+                        float(np.sum(k**2)) * tach_variance(sensors))
     nw = wheel_torque(h, dt_s, nw_window_s)
     u = input_vector(params, Nx_model_Nm, Nz_model_Nm, nw) * np.ones((len(roll), 1))
     return FilterInputs(meas, u, nw)

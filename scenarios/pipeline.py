@@ -25,7 +25,7 @@ import numpy as np
 
 from estimator import model as em
 from estimator.kalman import FilterResult, SmootherResult, kalman_filter, rts_smoother
-from estimator.preprocess import SensorNoise, prepare
+from estimator.preprocess import prepare
 from estimator.transition import discretize
 from rollout.chunks import ChunkedRollout
 from sim.frames import dcm_from_euler312
@@ -98,14 +98,6 @@ class TwoRuns:
     yaw_factors: np.ndarray
 
 
-def sensor_noise(s: Scenario) -> SensorNoise:
-    c = s.sensors
-    dss = c.sun.dss
-    return SensorNoise(c.earth.noise_deg, c.earth.quantum_deg, c.tachometer.noise_3sigma_rpm,
-                       c.tachometer.quantum_rpm,
-                       float(np.hypot(dss.noise_deg, dss.quantum_deg / np.sqrt(12))))
-
-
 def initial_prior(s: Scenario, params: em.ModelParams) -> tuple[np.ndarray, np.ndarray]:
     """Zero initial estimate, diagonal P0 from ``estimator.initial_sigma`` (model units)."""
     i, wn = s.estimator.initial_sigma, abs(params.omega_n_radps)
@@ -151,7 +143,7 @@ def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=Non
     if yaw_sigma is not None and sun_head is not None:
         yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
     inputs = prepare(params, s.sample_interval_s, roll, yaw, speeds, yaw_factors(s),
-                     sensor_noise(s), yaw_sigma, e.model_torques.roll_Nm,
+                     build.estimator_sensor_specs(s), yaw_sigma, e.model_torques.roll_Nm,
                      e.model_torques.yaw_Nm, e.wheel_torque_window_s)
     x0, P0 = initial_prior(s, params)
     return kalman_filter(inputs.measurements, disc, x0, P0, u=inputs.u), inputs.u
