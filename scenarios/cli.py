@@ -105,7 +105,7 @@ def _cmd_run(args) -> int:
     check_out_dir(out, args.force)
     start = time.perf_counter()
     with staged_run_dir(out, force=args.force) as stage:
-        summary = run_to_directory(scenario, stage, start)
+        summary = run_to_directory(scenario, stage)
     ends = ", ".join(f"{e:+.4f}" for e in summary["yaw_error_at_gap_end_deg"]) or "none"
     sig = ", ".join(f"{e:.4f}" for e in summary["yaw_sigma_at_gap_end_deg"]) or "none"
     print(f"{scenario.name}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; at Sun-gap "

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -31,9 +30,8 @@ from .runner import simulate, write_simulation
 from .schema import Scenario
 
 
-def run_to_directory(s: Scenario, stage: Path, start: float | None = None) -> dict:
+def run_to_directory(s: Scenario, stage: Path) -> dict:
     """Everything of one `dynprop run` into ``stage``; returns the summary."""
-    start = time.perf_counter() if start is None else start
     sim = simulate(s)
     writers = []
 
@@ -44,20 +42,18 @@ def run_to_directory(s: Scenario, stage: Path, start: float | None = None) -> di
         # truth.csv is written by a second process while the filters run; the filter
         # sees the telemetry exactly as written, so `dynprop estimate` reproduces it.
         written = write_simulation(stage, sim, truth_writer=in_background)
-        summary = _estimate_and_report(s, sim, written, stage, start, in_background)
+        summary = _estimate_and_report(s, sim, written, stage, in_background)
         for w in writers:
             w.wait()
     except BaseException:
         for w in writers:
             w.cancel()
         raise
-    summary["wall_s"] = round(time.perf_counter() - start, 3)
     write_summary(stage / "summary.json", summary)
     return summary
 
 
-def _estimate_and_report(s: Scenario, sim, written, stage: Path, start: float,
-                         in_background) -> dict:
+def _estimate_and_report(s: Scenario, sim, written, stage: Path, in_background) -> dict:
     runs = run_scenario(s, sim, written)
     t = sim.truth.t_s
     present = np.isfinite(written["yaw_deg"])
@@ -65,7 +61,7 @@ def _estimate_and_report(s: Scenario, sim, written, stage: Path, start: float,
                   estimate_columns(t, runs.real.x, runs.real.sigma, runs.params.omega_n_radps))
     nees_data = nees_series(runs)
     np.savez(stage / "comparison.npz", **comparison_arrays(runs, t, present, nees_data))
-    summary = summarize(s, runs, t, present, time.perf_counter() - start, nees_data)
+    summary = summarize(s, runs, t, present, nees_data)
     from .plotting import plot_run_figures
     plot_run_figures(stage, written)
     return summary
