@@ -259,7 +259,7 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
                  chunk: int = 4096) -> SmootherResult:
     """Rauch–Tung–Striebel smoother over a stored filter history."""
     n = len(result.x)
-    if n == 0:
+    if n < 2:  # nothing to smooth: the last filter estimate is the smoothed one
         return SmootherResult(result.x.copy(), result.P_packed.copy())
     u = _inputs(u, n)
     engine = _engine("smoother", chunk, backend)

@@ -70,7 +70,8 @@ class BackgroundWriter:
     def wait(self) -> None:
         self.process.join()
         if self.process.exitcode != 0:
-            raise OSError(f"writing {self.path.name} failed (exit {self.process.exitcode})")
+            raise RuntimeError(f"writing {self.path.name} failed "
+                               f"(exit {self.process.exitcode})")
 
     def cancel(self) -> None:
         if self.process.is_alive():

@@ -62,6 +62,14 @@ def _rms(a) -> float:
     return float(np.sqrt(np.nanmean(np.square(a))))
 
 
+def _mean_or_none(a) -> float | None:
+    """Mean of the finite values, or None (JSON null) when there are none, e.g. the
+    yaw NIS of a run that never sees the Sun."""
+    a = np.asarray(a, dtype=float)
+    a = a[np.isfinite(a)]
+    return float(a.mean()) if a.size else None
+
+
 def summarize(s: Scenario, runs, t_s, yaw_present, nees_data) -> dict:
     """summary.json: the figures of the run (DESIGN.md section 6 keys included).
     No wall-clock time: the same scenario and seed must give the same bytes."""
@@ -82,6 +90,8 @@ def summarize(s: Scenario, runs, t_s, yaw_present, nees_data) -> dict:
         "duration_s": s.duration_s, "dynprop_version": __version__,
         "backend": runs.real.backend,
         "yaw_error_rms_deg": _rms(err[:, Y]) * RAD2DEG,
+        "nees_mean_per_state": [float(v) for v in np.mean(
+            (err / np.maximum(runs.real.sigma, 1e-300))[::NEES_STRIDE] ** 2, axis=0)],
         "yaw_error_rms_linear_deg": _rms(err_lin[:, Y]) * RAD2DEG,
         "roll_error_rms_deg": _rms(err[:, R]) * RAD2DEG,
         "h_error_rms_Nms": _rms(err[:, 4]),
@@ -106,11 +116,11 @@ def summarize(s: Scenario, runs, t_s, yaw_present, nees_data) -> dict:
         "nees_dof": N_STATES, "nees_bounds_95_per_sample": nees_b,
         "nees_fraction_inside_95": fraction_inside(n_real, nees_b),
         "nees_fraction_inside_95_linear": fraction_inside(n_lin, nees_b),
-        "nis_mean": {m: float(np.nanmean(nis(runs.real.innovations[:, i],
-                                             runs.real.innovation_var[:, i])))
+        "nis_mean": {m: _mean_or_none(nis(runs.real.innovations[:, i],
+                                          runs.real.innovation_var[:, i]))
                      for i, m in enumerate(("roll", "yaw", "h"))},
-        "nis_mean_linear": {m: float(np.nanmean(nis(runs.linear.innovations[:, i],
-                                                    runs.linear.innovation_var[:, i])))
+        "nis_mean_linear": {m: _mean_or_none(nis(runs.linear.innovations[:, i],
+                                                 runs.linear.innovation_var[:, i]))
                             for i, m in enumerate(("roll", "yaw", "h"))},
         "nis_bounds_95_per_sample": nis_b,
     }

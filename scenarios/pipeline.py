@@ -150,6 +150,7 @@ def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=Non
 
 
 REQUIRED_TELEMETRY = ("t_s", "roll_deg", "pitch_deg", "yaw_deg", "wheel1_rpm", "wheel2_rpm")
+FALLBACK_YAW_SIGMA_DEG = 1.0  # yaw σ for files without a yaw_sigma_deg column
 
 
 def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]):
@@ -158,17 +159,24 @@ def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]):
     n_wheels = len(yaw_factors(s))
     speeds = np.column_stack([cols[f"wheel{i + 1}_rpm"] for i in range(n_wheels)]) \
         * (np.pi / 30.0)
-    sigma = cols["yaw_sigma_deg"] * DEG if "yaw_sigma_deg" in cols else None
+    if "yaw_sigma_deg" in cols:
+        sigma = cols["yaw_sigma_deg"] * DEG
+    else:
+        # A file with only the contract columns does not say which head each yaw
+        # came from: take the coarse sensors' ~1° (Section 2.1), not the DSS's 0.036°,
+        # which would make the filter badly over-confident on CASS yaw.
+        sigma = np.full(len(cols["t_s"]), FALLBACK_YAW_SIGMA_DEG * DEG)
     head = cols.get("sun_head")
     return cols["roll_deg"] * DEG, cols["yaw_deg"] * DEG, speeds, sigma, head
 
 
 def run_scenario(s: Scenario, sim: Simulation | None = None,
-                 telemetry_columns: dict[str, np.ndarray] | None = None) -> TwoRuns:
+                 telemetry_columns: dict[str, np.ndarray] | None = None, run: int = 0
+                 ) -> TwoRuns:
     """Both runs.  ``telemetry_columns`` (telemetry.csv read back) makes the real
     filter see exactly the file's values, so that ``dynprop estimate`` on that file
     reproduces the estimates bit for bit."""
-    sim = sim or simulate(s)
+    sim = sim or simulate(s, run)
     truth, tel, dt = sim.truth, sim.telemetry, s.sample_interval_s
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, dt)
@@ -197,7 +205,7 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
         sun_body=np.einsum("nij,nj->ni", c_br, truth.sun_orbit_frame))
     suite = build.build_sensors(s)
     # Fresh generators from the same seed: the twin's noise draws equal the real ones.
-    twin_tel = make_telemetry(twin_truth, suite, build.streams(s.seed),
+    twin_tel = make_telemetry(twin_truth, suite, build.streams(s.seed, run),
                               s.sensors.sun.min_sun_separation_deg)
 
     if telemetry_columns is None:

@@ -89,6 +89,16 @@ def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
         if bad.any():
             raise RunDirError(f"{path}: column {name} has a missing or non-numeric value in "
                               f"row {int(np.argmax(bad)) + 2}")
+    present = np.isfinite(cols["yaw_deg"])
+    if "yaw_sigma_deg" in cols:
+        sig = cols["yaw_sigma_deg"][present]
+        if not np.all(np.isfinite(sig) & (sig > 0)):
+            raise RunDirError(f"{path}: yaw_sigma_deg must be positive wherever yaw_deg is "
+                              "present")
+    if "sun_head" in cols:
+        head = cols["sun_head"][np.isfinite(cols["sun_head"])]
+        if not np.all(np.isin(head, (0.0, 1.0, 2.0))):
+            raise RunDirError(f"{path}: sun_head must be 0 (dss), 1 (cass1) or 2 (cass2)")
     steps = np.diff(t)
     if not np.allclose(steps, s.sample_interval_s, rtol=1e-6, atol=1e-6):
         k = int(np.argmax(~np.isclose(steps, s.sample_interval_s, rtol=1e-6, atol=1e-6)))

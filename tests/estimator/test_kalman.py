@@ -230,3 +230,22 @@ def test_closed_form_discretization_drives_the_filter_like_expm(rng):
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-10 * np.abs(b.x).max())
     np.testing.assert_allclose(a.P_packed, b.P_packed, rtol=0,
                                atol=1e-10 * np.abs(b.P_packed).max())
+
+
+def test_smoother_matches_a_dense_rts_reference(rng):
+    """Rauch–Tung–Striebel written out in numpy, from the filter's stored history."""
+    n = 1500
+    _, z = simulate_linear(n, 1, rng, yaw_hours=0.2)
+    res = kalman_filter(meas(z[:, 0]), DISC, np.zeros(N_STATES), P0)
+    sm = rts_smoother(res, DISC)
+    x, P = res.x, res.P
+    xs, Ps = x.copy(), P.copy()
+    for k in range(n - 2, -1, -1):
+        Pp = DISC.Phi @ P[k] @ DISC.Phi.T + DISC.Qd
+        C = P[k] @ DISC.Phi.T @ np.linalg.inv(Pp)
+        xs[k] = x[k] + C @ (xs[k + 1] - DISC.Phi @ x[k])
+        Ps[k] = P[k] + C @ (Ps[k + 1] - Pp) @ C.T
+    np.testing.assert_allclose(sm.x, xs, rtol=0, atol=1e-9 * np.abs(xs).max())
+    np.testing.assert_allclose(sm.P, Ps, rtol=0, atol=1e-9 * np.abs(Ps).max())
+    one = rts_smoother(kalman_filter(meas(z[:1, 0]), DISC, np.zeros(N_STATES), P0), DISC)
+    assert one.x.shape == (1, N_STATES)

@@ -374,7 +374,9 @@ def test_same_seed_gives_a_byte_identical_run_directory(tmp_path):
     scenario and seed alone."""
     dirs = [tmp_path / "a", tmp_path / "b"]
     for d in dirs:
-        rc, _, err = run_cli("run", "goes_next_equinox", "--duration-s", "120", "--out", str(d))
+        # 6 h: more rows than one CSV block, so the multi-process writer is exercised.
+        rc, _, err = run_cli("run", "goes_next_equinox", "--duration-s", "21600", "--out",
+                             str(d))
         assert rc == 0, err
     files = sorted(p.relative_to(dirs[0]) for p in dirs[0].rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(dirs[1]) for p in dirs[1].rglob("*") if p.is_file())
