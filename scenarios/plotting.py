@@ -83,7 +83,9 @@ def plot_run_figures(run_dir: Path, telemetry: dict | None = None) -> list[Path]
 
     jobs = [
         (plot_errors, (t, gap, {"roll": series("roll", "deg"), "yaw": series("yaw", "deg"),
-                                "h": series("h", "N m s")}, title), out / "errors.png"),
+                                "h": series("h", "N m s")}, title,
+                       # Sun gaps as summary.json counts them (not the noon outages).
+                       3600.0 * scenario["estimator"]["sun_gap_min_h"]), out / "errors.png"),
         (plot_consistency, (t, held(c["nees_real"]), held(c["nees_linear"]), len(STATE_KEYS),
                             chi2_bounds(len(STATE_KEYS)), nis, chi2_bounds(1), title),
          out / "consistency.png"),
