@@ -56,6 +56,9 @@ class SensorSpecs:
     yaw_quantum_deg: float = 0.125
     wheel_inertia_kgm2: float = 0.1082
     cant_deg: float = 1.656
+    # Σ k_i² with h = Σ k_i Ω_i (k_i = I_w,i a_i·ẑ); None means the two canted wheels,
+    # 2 (I_w sin c)².  The backup configuration's yaw reaction wheel needs its own.
+    h_factor_sq_sum: float | None = None
 
 
 def quantized_variance(sigma: float, quantum: float) -> float:
@@ -79,8 +82,12 @@ def yaw_variance(s: SensorSpecs = SensorSpecs()) -> float:
 
 
 def h_variance(s: SensorSpecs = SensorSpecs()) -> float:
-    """Variance of h = I_w sin c (ω1 − ω2) (Eq. 2) from two tachometers, (N m s)²."""
-    return 2.0 * (s.wheel_inertia_kgm2 * np.sin(np.deg2rad(s.cant_deg))) ** 2 * tach_variance(s)
+    """Variance of h = Σ k_i Ω_i from the tachometers, (N m s)²: Σ k_i² R_tach, which for
+    the two canted wheels of Eq. 2 is 2 (I_w sin c)² R_tach."""
+    k2 = s.h_factor_sq_sum
+    if k2 is None:
+        k2 = 2.0 * (s.wheel_inertia_kgm2 * np.sin(np.deg2rad(s.cant_deg))) ** 2
+    return k2 * tach_variance(s)
 
 
 def combined_variance(H_Nms: float, s: SensorSpecs = SensorSpecs()) -> float:

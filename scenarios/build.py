@@ -106,4 +106,11 @@ def estimator_sensor_specs(s: Scenario):
                        tach_noise_3sigma_rpm=c.tachometer.noise_3sigma_rpm,
                        roll_noise_deg=c.earth.noise_deg, roll_quantum_deg=c.earth.quantum_deg,
                        yaw_noise_deg=c.sun.dss.noise_deg, yaw_quantum_deg=c.sun.dss.quantum_deg,
-                       wheel_inertia_kgm2=w.spin_inertia_kgm2, cant_deg=w.cant_deg)
+                       wheel_inertia_kgm2=w.spin_inertia_kgm2, cant_deg=w.cant_deg,
+                       h_factor_sq_sum=float(np.sum(yaw_factors(s) ** 2)))
+
+
+def yaw_factors(s: Scenario) -> np.ndarray:
+    """k_i with h = Σ k_i Ω_i: each wheel's spin inertia times its axis's z component."""
+    sc = build_spacecraft(s)
+    return sc.wheel_inertias * sc.wheel_axes[:, 2]

@@ -106,11 +106,6 @@ def initial_prior(s: Scenario, params: em.ModelParams) -> tuple[np.ndarray, np.n
     return np.zeros(em.N_STATES), np.diag(np.square(sig))
 
 
-def yaw_factors(s: Scenario) -> np.ndarray:
-    sc = build.build_spacecraft(s)
-    return sc.wheel_inertias * sc.wheel_axes[:, 2]
-
-
 def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
     """Per-sample factor on the ground yaw variance for the filter.
 
@@ -142,7 +137,7 @@ def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=Non
     e = s.estimator
     if yaw_sigma is not None and sun_head is not None:
         yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
-    inputs = prepare(params, s.sample_interval_s, roll, yaw, speeds, yaw_factors(s),
+    inputs = prepare(params, s.sample_interval_s, roll, yaw, speeds, build.yaw_factors(s),
                      build.estimator_sensor_specs(s), yaw_sigma, e.model_torques.roll_Nm,
                      e.model_torques.yaw_Nm, e.wheel_torque_window_s)
     x0, P0 = initial_prior(s, params)
@@ -156,7 +151,7 @@ FALLBACK_YAW_SIGMA_DEG = 1.0  # yaw σ for files without a yaw_sigma_deg column
 def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]):
     """(roll, yaw, wheel speeds, yaw σ or None, Sun head or None) in SI from the
     columns of a telemetry.csv; the single path used by `run` and `estimate`."""
-    n_wheels = len(yaw_factors(s))
+    n_wheels = len(build.yaw_factors(s))
     speeds = np.column_stack([cols[f"wheel{i + 1}_rpm"] for i in range(n_wheels)]) \
         * (np.pi / 30.0)
     if "yaw_sigma_deg" in cols:
@@ -196,7 +191,7 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
     nw_true = np.append(np.diff(truth.h_Nms) / dt, 0.0)
     u_twin = em.input_vector(params, mt.roll_Nm + res_x, mt.yaw_Nm + res_z, nw_true)
     twin = propagate_linear(disc, truth_model[0], u_twin)
-    k = yaw_factors(s)
+    k = build.yaw_factors(s)
     speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms, k / (k @ k))
     c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)
     twin_truth = SimpleNamespace(

@@ -23,7 +23,6 @@ from .pipeline import (
     filter_telemetry,
     run_scenario,
     telemetry_inputs,
-    yaw_factors,
 )
 from .rundir import RunDirError
 from .runner import simulate, write_simulation
@@ -77,7 +76,7 @@ def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
     except (ValueError, UnicodeDecodeError) as exc:
         raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
     missing = [c for c in REQUIRED_TELEMETRY if c not in cols]
-    n_wheels = len(yaw_factors(s))
+    n_wheels = len(build.yaw_factors(s))
     missing += [f"wheel{i + 1}_rpm" for i in range(2, n_wheels) if f"wheel{i + 1}_rpm" not in cols]
     if missing:
         raise RunDirError(f"{path}: missing column(s) {', '.join(missing)}")

@@ -49,3 +49,20 @@ def test_bad_scenario_is_one_line_exit_2(command, capsys):
     assert main([command, "goes_next_equinox", "--set", "spacecraft.wheels.speed_rpm=0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "spacecraft.wheels.speed_rpm" in err[0]
+
+
+def test_h_variance_follows_the_wheel_configuration():
+    """h = Σ k_i Ω_i: two canted wheels give 2 (I_w sin c)² R_tach (Eqs. 2, 46); the
+    backup configuration (I_w sin c)² + I_rw², its yaw reaction wheel along z."""
+    import numpy as np
+
+    from estimator.covariance import h_variance, tach_variance
+    from scenarios.build import estimator_sensor_specs
+    from scenarios.loader import load_scenario
+
+    kc = 0.1082 * np.sin(np.deg2rad(1.656))
+    nominal = estimator_sensor_specs(load_scenario("goes_next_equinox"))
+    backup = estimator_sensor_specs(load_scenario("backup_wheel"))
+    assert h_variance(nominal) == pytest.approx(2 * kc**2 * tach_variance(nominal), rel=1e-12)
+    assert h_variance(backup) == pytest.approx((kc**2 + 0.008626**2) * tach_variance(backup),
+                                               rel=1e-12)
