@@ -275,6 +275,11 @@ class Estimator(_Section):
                                          "window for N_w* = ḣ from the tachometers (s)")
     sun_gap_min_h: float = Field(4.0, gt=0, description="a yaw outage at least this long "
                                  "counts as a Sun gap in the summary (h)")
+    dss_error_correlation_s: float = Field(
+        600.0, gt=0, description="how long the DSS yaw error stays correlated: its "
+        "quantisation share of the yaw variance counts once per this time (s); measured "
+        "autocorrelation 0.5 at 8.5 min, because the out-of-plane angle that sets yaw "
+        "moves slowly")
 
 
 class Scenario(_Section):
