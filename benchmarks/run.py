@@ -47,6 +47,15 @@ def median_time(fn, repeats: int, warmup: int = 1) -> float:
     return statistics.median(times)
 
 
+def cli_wall_s(*args: str, repeats: int = 3) -> float:
+    """Median wall time of a whole `dynprop` command writing into a scratch directory."""
+    exe = str(Path(sys.executable).with_name("dynprop"))
+    with tempfile.TemporaryDirectory() as tmp:
+        return median_time(lambda: subprocess.run(
+            [exe, *args, "--out", f"{tmp}/run", "--force"], check=True, capture_output=True),
+            repeats=repeats)
+
+
 def truth_day(model: TruthModel):
     """One simulated day at 0.512 s output with every torque, the control and the
     ripple on, including input generation and result assembly."""
@@ -72,12 +81,7 @@ def main() -> None:
     scenario = load_scenario("goes_next_equinox", ["duration_s=86400"])
     report("truth_telemetry_s_per_day",
            median_time(lambda: simulate(scenario, model=compiled), repeats=5), "s")
-    with tempfile.TemporaryDirectory() as tmp:
-        def command():
-            subprocess.run([str(Path(sys.executable).with_name("dynprop")), "simulate",
-                            "goes_next_equinox", "--out", f"{tmp}/run", "--force"],
-                           check=True, capture_output=True)
-        report("simulate_2day_wall_s", median_time(command, repeats=3), "s")
+    report("simulate_2day_wall_s", cli_wall_s("simulate", "goes_next_equinox"), "s")
 
     # Issue 4: the filter over one day, roll and h every step, yaw two thirds of it.
     from estimator.kalman import Measurements, dense_filter, kalman_filter
@@ -94,12 +98,7 @@ def main() -> None:
     x0, P0 = np.zeros(9), np.diag([1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12])
     report("filter_s_per_day", median_time(lambda: kalman_filter(meas, disc, x0, P0),
                                            repeats=5), "s")
-    with tempfile.TemporaryDirectory() as tmp:
-        def full_run():
-            subprocess.run([str(Path(sys.executable).with_name("dynprop")), "run",
-                            "goes_next_equinox", "--out", f"{tmp}/run", "--force"],
-                           check=True, capture_output=True)
-        report("run_2day_wall_s", median_time(full_run, repeats=3), "s")
+    report("run_2day_wall_s", cli_wall_s("run", "goes_next_equinox"), "s")
     k = 5000  # the plain-numpy loop, for comparison, scaled to a day
     part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,
                         1.5e-7)

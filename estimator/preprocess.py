@@ -49,8 +49,7 @@ def wheel_torque(h_Nms: np.ndarray, dt_s: float, window_s: float = 20.0) -> np.n
 @dataclass(frozen=True)
 class FilterInputs:
     measurements: Measurements
-    u: np.ndarray          # (N, 9), Eq. 12a
-    Nw_model_Nm: np.ndarray
+    u: np.ndarray          # (N, 9), Eq. 12a; its h column is the modelled N_w*
 
 
 def prepare(params: ModelParams, dt_s: float, roll_rad, yaw_rad, wheel_speeds_radps,
@@ -74,4 +73,4 @@ def prepare(params: ModelParams, dt_s: float, roll_rad, yaw_rad, wheel_speeds_ra
                         float(np.sum(k**2)) * tach_variance(sensors))
     nw = wheel_torque(h, dt_s, nw_window_s)
     u = input_vector(params, Nx_model_Nm, Nz_model_Nm, nw) * np.ones((len(roll), 1))
-    return FilterInputs(meas, u, nw)
+    return FilterInputs(meas, u)

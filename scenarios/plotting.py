@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from estimator import model as em
 from estimator.consistency import chi2_bounds
 from plots.run_figures import (
     plot_consistency,
@@ -23,7 +24,9 @@ from plots.truth import plot_truth
 from .csvio import read_csv
 from .rundir import RunDirError
 
-STATE_KEYS = ("roll", "roll_rate", "yaw", "yaw_rate", "h", "N_px", "N_pz", "N_cx", "N_cz")
+# Columns of the comparison arrays: the model's state indices (estimator.model).
+COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
+           "N_cx": em.NCX, "N_cz": em.NCZ}
 
 
 def _save(fig, path: Path) -> Path:
@@ -63,7 +66,7 @@ def plot_run_figures(run_dir: Path, telemetry: dict | None = None) -> list[Path]
     tel = telemetry if telemetry is not None else read_csv(run_dir / "telemetry.csv")
     t = c["t_s"]
     gap = c["yaw_present"] < 0.5
-    col = {k: i for i, k in enumerate(STATE_KEYS)}
+    col = COLUMNS
 
     def series(name, unit):
         i = col[name]
@@ -86,8 +89,8 @@ def plot_run_figures(run_dir: Path, telemetry: dict | None = None) -> list[Path]
                                 "h": series("h", "N m s")}, title,
                        # Sun gaps as summary.json counts them (not the noon outages).
                        3600.0 * scenario["estimator"]["sun_gap_min_h"]), out / "errors.png"),
-        (plot_consistency, (t, held(c["nees_real"]), held(c["nees_linear"]), len(STATE_KEYS),
-                            chi2_bounds(len(STATE_KEYS)), nis, chi2_bounds(1), title),
+        (plot_consistency, (t, held(c["nees_real"]), held(c["nees_linear"]), em.N_STATES,
+                            chi2_bounds(em.N_STATES), nis, chi2_bounds(1), title),
          out / "consistency.png"),
         (plot_torques, (t, gap, {k: c["x_real"][:, col[k]] for k in torques},
                         {k: c["truth_model"][:, col[k]] for k in torques},
@@ -108,8 +111,7 @@ def plot_run(run_dir: Path) -> list[Path]:
     if missing:
         raise RunDirError(f"{run_dir}: not a run directory (missing {', '.join(missing)})")
     scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
-    title = (f"{scenario['name']} — epoch {scenario['epoch_utc']}, seed {scenario['seed']}, "
-             f"dynprop {scenario.get('dynprop_version', '?')}")
+    title = _title(scenario)
     truth = read_csv(run_dir / "truth.csv")
     tel = read_csv(run_dir / "telemetry.csv")
     out = run_dir / "plots"

@@ -528,19 +528,27 @@ def test_ground_yaw_with_zero_attitude_is_within_quantisation(spacecraft, orbit,
     epoch = ephemeris.parse_epoch(epoch_utc)
     truth = simulate_truth(spacecraft, orbit, env, ctrl, InitialState(), epoch, DAY_S)
     assert np.max(np.abs(truth.euler_rad)) < 1e-12
-    tel = make_telemetry(truth, SensorSuite(noise_enabled=False), streams(0))
+    tel, sep_sin, err, uses = _noise_free_yaw_errors(truth)
     assert np.all(tel.roll_rad == 0.0) and np.all(tel.pitch_rad == 0.0)
-    s = truth.sun_orbit_frame
-    sep_sin = np.hypot(s[:, 0], s[:, 1])
-    err = np.abs(_wrap_deg((tel.yaw_rad - truth.yaw_rad) / DEG))
-    for k, name in enumerate(HEAD_ORDER):
-        use = tel.yaw_head == k
-        assert use.sum() > 10_000, name
+    for name, use in uses:
         q = HEADS[name][3]
         assert np.all(err[use] <= _direction_error_yaw_bound_deg(q, sep_sin[use]) + 1e-9), name
         if name == "dss":
             assert np.max(err[use]) <= q / 2 + 1e-9
             assert np.all(err[use] * sep_sin[use] <= q / 2 + 1e-9)
+
+
+def _noise_free_yaw_errors(truth):
+    """Noise-free telemetry of ``truth``, the sine of the Sun's angle from the yaw
+    axis, |ground − true yaw| (deg), and each head's samples (each used ≥ 10 000 times)."""
+    tel = make_telemetry(truth, SensorSuite(noise_enabled=False), streams(0))
+    s = truth.sun_orbit_frame
+    sep_sin = np.hypot(s[:, 0], s[:, 1])
+    err = np.abs(_wrap_deg((tel.yaw_rad - truth.yaw_rad) / DEG))
+    uses = [(name, tel.yaw_head == k) for k, name in enumerate(HEAD_ORDER)]
+    for name, use in uses:
+        assert use.sum() > 10_000, name
+    return tel, sep_sin, err, uses
 
 
 @pytest.fixture(scope="module")
@@ -560,13 +568,8 @@ def test_ground_yaw_recovers_a_two_degree_offset_noise_off(yaw_offset_truth):
     roll and pitch are each off by ≤ 0.005° (Earth quantum / 2), rotating the de-rotated
     Sun by ≤ 0.01°; the yaw error is ≤ asin(sin(q + 0.01°)/sin p) for every head."""
     truth = yaw_offset_truth
-    tel = make_telemetry(truth, SensorSuite(noise_enabled=False), streams(0))
-    s = truth.sun_orbit_frame
-    sep_sin = np.hypot(s[:, 0], s[:, 1])
-    err = np.abs(_wrap_deg((tel.yaw_rad - truth.yaw_rad) / DEG))
-    for k, name in enumerate(HEAD_ORDER):
-        use = tel.yaw_head == k
-        assert use.sum() > 10_000, name
+    _, sep_sin, err, uses = _noise_free_yaw_errors(truth)
+    for name, use in uses:
         bound = _direction_error_yaw_bound_deg(HEADS[name][3] + 0.01, sep_sin[use])
         assert np.all(err[use] <= bound + 1e-9), name
 
