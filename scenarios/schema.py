@@ -144,8 +144,8 @@ class Environment(_Section):
     solar: Solar = Field(default_factory=Solar)
     magnetic: Magnetic = Field(default_factory=Magnetic)
     ripple: Ripple = Field(default_factory=Ripple)
-    shadow_model: Literal["conical", "cylindrical"] = Field("conical",
-                                                            description="Earth shadow model")
+    shadow_model: Literal["conical", "cylindrical", "none"] = Field(
+        "conical", description="Earth shadow model; 'none' removes eclipses")
 
 
 class Control(_Section):

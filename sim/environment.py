@@ -141,8 +141,8 @@ class Environment:
     shadow_model: str = "conical"
 
     def __post_init__(self) -> None:
-        if self.shadow_model not in ("conical", "cylindrical"):
-            raise ValueError("shadow_model must be 'conical' or 'cylindrical'")
+        if self.shadow_model not in ("conical", "cylindrical", "none"):
+            raise ValueError("shadow_model must be 'conical', 'cylindrical' or 'none'")
 
     @classmethod
     def torque_free(cls) -> Environment:

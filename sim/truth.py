@@ -187,6 +187,8 @@ def _shadow_on_grid(alpha: np.ndarray, sun: dict[str, np.ndarray], radius: float
     """
     n = len(alpha)
     out = np.ones(n)
+    if model == "none":  # no eclipses: isolates their effect (the linearization report)
+        return out
 
     def r_sat(i):
         return radius * np.stack([np.cos(alpha[i]), np.sin(alpha[i]), np.zeros(len(i))], -1)
