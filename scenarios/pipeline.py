@@ -63,24 +63,33 @@ def project_torques(t_s, nx, nz, w0):
     return states, nx - states[:, 0] - ncx, nz - states[:, 1] - ncz
 
 
-@lru_cache(maxsize=2)
-def _linear_engine() -> ChunkedRollout:
-    """x_{k+1} = Φ x_k + Γ u_k compiled once (Φ, Γ as parameters)."""
-    x, u = ca.SX.sym("x", em.N_STATES), ca.SX.sym("u", em.N_STATES)
-    p = ca.SX.sym("p", 2 * em.N_STATES**2)
-    n2 = em.N_STATES**2
-    phi = ca.reshape(p[:n2], em.N_STATES, em.N_STATES)
-    gam = ca.reshape(p[n2:], em.N_STATES, em.N_STATES)
-    step = ca.Function("dynprop_linear", [x, u, p], [phi @ x + gam @ u, x])
+@lru_cache(maxsize=4)
+def _linear_engine(n_x: int = em.N_STATES, n_u: int = em.N_STATES) -> ChunkedRollout:
+    """x_{k+1} = Φ x_k + Γ u_k compiled once per shape (Φ, Γ as parameters)."""
+    x, u = ca.SX.sym("x", n_x), ca.SX.sym("u", n_u)
+    p = ca.SX.sym("p", n_x * n_x + n_x * n_u)
+    n2 = n_x * n_x
+    phi = ca.reshape(p[:n2], n_x, n_x)
+    gam = ca.reshape(p[n2:], n_x, n_u)
+    name = "dynprop_linear" if (n_x, n_u) == (em.N_STATES, em.N_STATES) \
+        else f"dynprop_linear_{n_x}x{n_u}"
+    step = ca.Function(name, [x, u, p], [phi @ x + gam @ u, x])
     return ChunkedRollout(step)
+
+
+def propagate_lti(Phi, Gamma, x0, u) -> np.ndarray:
+    """x_{k+1} = Φ x_k + Γ u_k from x_0 = x0 for each row of u (N, m); returns the
+    states at every sample (N, n), x0 first.  Compiled, no Python loop per step."""
+    Phi, Gamma = np.asarray(Phi, float), np.asarray(Gamma, float)
+    p = np.concatenate([Phi.ravel(order="F"), Gamma.ravel(order="F")])
+    _, aux = _linear_engine(*Gamma.shape).run(np.asarray(x0, float),
+                                              [np.asarray(u, float)], p)
+    return aux
 
 
 def propagate_linear(disc, x0, u) -> np.ndarray:
     """The linear model's states at every sample (N, 9), exact for ZOH inputs."""
-    p = np.concatenate([np.asarray(disc.Phi).ravel(order="F"),
-                        np.asarray(disc.Gamma).ravel(order="F")])
-    _, aux = _linear_engine().run(np.asarray(x0, float), [u], p)
-    return aux
+    return propagate_lti(disc.Phi, disc.Gamma, x0, u)
 
 
 @dataclass(frozen=True)
@@ -94,7 +103,7 @@ class TwoRuns:
     twin_model: np.ndarray      # linear twin's states (N, 9)
     real: FilterResult
     linear: FilterResult
-    smoothed: SmootherResult
+    smoothed: SmootherResult | None
     yaw_factors: np.ndarray
 
 
@@ -171,11 +180,12 @@ def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]):
 
 
 def run_scenario(s: Scenario, sim: Simulation | None = None,
-                 telemetry_columns: dict[str, np.ndarray] | None = None, run: int = 0
-                 ) -> TwoRuns:
+                 telemetry_columns: dict[str, np.ndarray] | None = None, run: int = 0,
+                 smooth: bool = True) -> TwoRuns:
     """Both runs.  ``telemetry_columns`` (telemetry.csv read back) makes the real
     filter see exactly the file's values, so that ``dynprop estimate`` on that file
-    reproduces the estimates bit for bit."""
+    reproduces the estimates bit for bit.  ``smooth=False`` skips the smoother
+    (``smoothed`` is None) for analyses that need only the filters."""
     sim = sim or simulate(s, run)
     truth, tel, dt = sim.truth, sim.telemetry, s.sample_interval_s
     params, noise = build.estimator_model(s)
@@ -217,5 +227,5 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
     twin_head = np.where(twin_tel.yaw_head >= 0, twin_tel.yaw_head, np.nan)
     linear, _ = filter_telemetry(s, params, disc, twin_tel.roll_rad, twin_tel.yaw_rad,
                                  twin_tel.wheel_speeds_radps, twin_tel.yaw_sigma_rad, twin_head)
-    smoothed = rts_smoother(real, disc, u=u)
+    smoothed = rts_smoother(real, disc, u=u) if smooth else None
     return TwoRuns(sim, twin_tel, params, truth_model, twin, real, linear, smoothed, k)
