@@ -61,6 +61,11 @@ def _build_parser() -> argparse.ArgumentParser:
     _scenario_args(obs)
     cov = sub.add_parser("covariance", help="steady-state yaw accuracy of Section 6")
     _scenario_args(cov)
+    lin = sub.add_parser("linearization", help="linearization-validation report: Jacobian vs "
+                         "the paper, nonlinear vs linear propagation, error budget")
+    _scenario_args(lin)
+    lin.add_argument("--out", required=True, type=Path, help="new report directory")
+    lin.add_argument("--force", action="store_true", help="replace a non-empty --out")
     plot = sub.add_parser("plot", help="(re)draw the figures of a run directory")
     plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser
@@ -166,9 +171,38 @@ def _cmd_covariance(args) -> int:
     return 0
 
 
+def _reproduce_command(args) -> str:
+    """The command line that reproduces a report, as the user would type it."""
+    parts = ["dynprop", args.command, args.scenario]
+    if args.seed is not None:
+        parts += ["--seed", args.seed]
+    if args.duration_s is not None:
+        parts += ["--duration-s", args.duration_s]
+    for s in args.set:
+        parts += ["--set", s]
+    return " ".join(parts + ["--out", "DIR"])
+
+
+def _cmd_linearization(args) -> int:
+    from .linearization.report import build_report, write_report
+    from .rundir import check_out_dir, staged_run_dir
+
+    scenario = load_with_overrides(args)
+    check_out_dir(args.out, args.force)
+    start = time.perf_counter()
+    report, arrays = build_report(scenario, _reproduce_command(args))
+    with staged_run_dir(args.out, force=args.force) as stage:
+        write_report(stage, report, arrays)
+    print(report["verdict"])
+    print(f"{time.perf_counter() - start:.1f} s; wrote {args.out}/report.md, report.json "
+          "and figures")
+    return 0
+
+
 COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd_plot,
             "run": _cmd_run, "estimate": _cmd_estimate,
-            "observability": _cmd_observability, "covariance": _cmd_covariance}
+            "observability": _cmd_observability, "covariance": _cmd_covariance,
+            "linearization": _cmd_linearization}
 
 
 def main(argv: list[str] | None = None) -> int:

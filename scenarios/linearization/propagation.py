@@ -1,0 +1,185 @@
+"""Section 2 of the linearization report: nonlinear against linear propagation.
+
+The nonlinear truth and a linear model start from the same deviation and are
+driven by the same torques: the true external roll and yaw torques (gravity
+gradient excluded, the models carry it in F) and the true wheel-momentum rate
+N_w = ḣ.  Their difference, linear minus nonlinear, is the *divergence*.  Two
+linear models are propagated:
+
+- ``eq11``: the paper's model (Eq. 11c and the h column of Eq. 11d), the one
+  the filter uses;
+- ``jacobian``: the CasADi Jacobian of the truth at the nominal state, in the
+  same units.  Its divergence is the pure second-order remainder, so it must
+  grow as the square of the initial error; any first-order part of the eq11
+  divergence is the price of the paper's approximations (Eqs. 5 and 6).
+
+Scenario variants are expressed as ``--set`` style (key, value) pairs, so every
+row of the report names the overrides that reproduce it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.linalg import expm
+
+from estimator import model as em
+from sim.linearize import linearize_about_nominal
+
+from .. import build
+from ..loader import validate
+from ..pipeline import EXTERNAL, euler_rates, project_torques, propagate_linear, propagate_lti
+from ..schema import Scenario
+from .coefficients import eq11_matrices, model_matrices
+
+DEG = np.pi / 180.0
+SWEEP_DEG = (0.01, 0.1, 1.0, 3.0, 10.0)
+ENVELOPE = 64  # samples per bin of the |divergence| envelopes kept for the figures
+
+Change = tuple[str, Any]
+
+
+def variant(s: Scenario, changes: list[Change]) -> Scenario:
+    """The scenario with dotted-key changes applied and validated like ``--set``."""
+    raw = s.model_dump(mode="json")
+    for key, value in changes:
+        node = raw
+        *parents, last = key.split(".")
+        for k in parents:
+            node = node[k]
+        node[last] = value
+    return validate(raw)
+
+
+def set_flags(changes: list[Change]) -> str:
+    """The changes as ``--set`` options (values in YAML flow syntax)."""
+    return " ".join(f"--set {k}={json.dumps(v, separators=(',', ':'))}" for k, v in changes)
+
+
+def sweep_changes(s: Scenario, kind: str, delta_deg: float, omega_n: float,
+                  pitch: bool = True) -> list[Change]:
+    """Initial roll and yaw errors of δ (``attitude``), or initial roll and yaw rates
+    δ·|ω_n| (``rate``): a rate error ω starts a nutation cone of half-angle ≈ ω/|ω_n|,
+    so both sweeps span the same 0.01°–10° of attitude excursion.  (10 °/s itself would
+    tumble the spacecraft: the body momentum would be 5 times H.)  The filter's initial
+    σ is widened to cover the error, so that the filter's consistency measures the
+    model, not a prior that excludes the truth.  Pitch gets the same error unless
+    ``pitch`` is false: its coupling into roll and yaw is second order (Eq. 3b)."""
+    i, sig = s.initial_state, s.estimator.initial_sigma
+    if kind == "attitude":
+        return [("initial_state.roll_deg", i.roll_deg + delta_deg),
+                ("initial_state.pitch_deg", i.pitch_deg + delta_deg * pitch),
+                ("initial_state.yaw_deg", i.yaw_deg + delta_deg),
+                ("estimator.initial_sigma.roll_deg", max(sig.roll_deg, delta_deg)),
+                ("estimator.initial_sigma.yaw_deg", max(sig.yaw_deg, delta_deg))]
+    if kind == "rate":
+        rate = delta_deg * abs(omega_n)
+        w = list(i.rate_wrt_orbit_degps)
+        return [("initial_state.rate_wrt_orbit_degps",
+                 [w[0] + rate, w[1] + rate * pitch, w[2] + rate]),
+                ("estimator.initial_sigma.roll_rate_degps", max(sig.roll_rate_degps, rate)),
+                ("estimator.initial_sigma.yaw_rate_degps", max(sig.yaw_rate_degps, rate))]
+    raise ValueError(f"unknown sweep kind {kind!r}")
+
+
+@dataclass(frozen=True)
+class LinearModel:
+    """A discretized 5-state roll/yaw/h model: x_{k+1} = Φ x_k + Γ [N_x, N_z, N_w]_k."""
+
+    name: str
+    F: np.ndarray
+    G: np.ndarray
+    Phi: np.ndarray
+    Gamma: np.ndarray
+
+
+def discretize_lti(F: np.ndarray, G: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact zero-order-hold Φ and Γ from one matrix exponential (Van Loan)."""
+    n, m = G.shape
+    aug = np.zeros((n + m, n + m))
+    aug[:n, :n], aug[:n, n:] = F, G
+    e = expm(aug * dt)
+    return e[:n, :n], e[:n, n:]
+
+
+def linear_models(s: Scenario) -> dict[str, LinearModel]:
+    """The paper's Eq. 11 model and the exact Jacobian, for this scenario's spacecraft."""
+    params, _ = build.estimator_model(s)
+    wn, dt = params.omega_n_radps, s.sample_interval_s
+    lin = linearize_about_nominal(build.build_spacecraft(s), build.orbit(s))
+    mats = {"eq11": eq11_matrices(params.omega0_radps, wn, params.H_Nms),
+            "jacobian": model_matrices(lin.wrt_state, lin.wrt_input, wn)}
+    return {k: LinearModel(k, F, G, *discretize_lti(F, G, dt)) for k, (F, G) in mats.items()}
+
+
+def model_state(truth, omega_n: float) -> np.ndarray:
+    """The truth as [r, ṙ/ω_n, y, ẏ/ω_n, h] (N, 5), Euler rates from ω_BR."""
+    rates = euler_rates(truth.euler_rad, truth.w_br_radps)
+    return np.column_stack([truth.roll_rad, rates[:, 1] / omega_n, truth.yaw_rad,
+                            rates[:, 0] / omega_n, truth.h_Nms])
+
+
+def model_inputs(truth, dt: float) -> np.ndarray:
+    """[N_x, N_z, N_w] (N, 3): true external body torques and N_w averaged over each
+    step (exact for h under a zero-order hold)."""
+    ext = sum(truth.torques[k] for k in EXTERNAL)
+    nw = np.append(np.diff(truth.h_Nms) / dt, 0.0)
+    return np.column_stack([ext[:, 0], ext[:, 2], nw])
+
+
+def divergence(x_truth: np.ndarray, u: np.ndarray, m: LinearModel, start: int = 0,
+               stop: int | None = None) -> np.ndarray:
+    """Linear minus nonlinear (N', 5) from ``start`` to ``stop`` (inclusive), the
+    linear model started on the truth at ``start``."""
+    stop = len(x_truth) - 1 if stop is None else stop
+    lin = propagate_lti(m.Phi, m.Gamma, x_truth[start], u[start:stop + 1])
+    return lin - x_truth[start:stop + 1]
+
+
+def envelope(a: np.ndarray, block: int = ENVELOPE) -> np.ndarray:
+    """max |a| over consecutive blocks (keeps nutation peaks that decimation would drop)."""
+    n = len(a) // block * block
+    env = np.abs(a[:n]).reshape(-1, block).max(axis=1)
+    return np.append(env, np.abs(a[n:]).max()) if n < len(a) else env
+
+
+def first_complete_gap(yaw_present: np.ndarray, dt: float, min_h: float):
+    """(start, end) sample indices of the first Sun gap that closes within the run."""
+    from ..outputs import sun_gaps
+    for a, b in sun_gaps(yaw_present, dt, min_h):
+        if b < len(yaw_present):
+            return int(a), int(b)
+    return None
+
+
+def gap_yaw_errors(s: Scenario, truth, gap: tuple[int, int]) -> dict[str, float]:
+    """Yaw error (deg) of Eq. 11 propagated across the Sun gap from the truth at its
+    start: with the true torques (``dynamics``), and with the paper's torque model
+    instead (``torque_model``: N* plus the constant + ω0-sinusoid states fitted over
+    the run, Eqs. 9 and 18; the fit's residual is what the model cannot represent)."""
+    a, b = gap
+    params, noise = build.estimator_model(s)
+    dt, wn = s.sample_interval_s, params.omega_n_radps
+    x5, u = model_state(truth, wn), model_inputs(truth, dt)
+    eq11 = linear_models_eq11(s)
+    dyn = divergence(x5, u, eq11, a, b)[-1]
+    mt = s.estimator.model_torques
+    states, _, _ = project_torques(truth.t_s, u[:, 0] - mt.roll_Nm, u[:, 1] - mt.yaw_Nm,
+                                   params.omega0_radps)
+    from estimator.transition import discretize
+    disc = discretize(params, noise, dt)
+    x0 = np.concatenate([x5[a], states[a]])
+    uu = em.input_vector(params, mt.roll_Nm, mt.yaw_Nm, u[a:b + 1, 2])
+    tq = propagate_linear(disc, x0, uu)[-1, :5] - x5[b]
+    return {"dynamics_deg": float(dyn[2] / DEG), "torque_model_deg": float(tq[2] / DEG),
+            "dynamics_roll_deg": float(dyn[0] / DEG),
+            "torque_model_roll_deg": float(tq[0] / DEG)}
+
+
+def linear_models_eq11(s: Scenario) -> LinearModel:
+    params, _ = build.estimator_model(s)
+    F, G = eq11_matrices(params.omega0_radps, params.omega_n_radps, params.H_Nms)
+    return LinearModel("eq11", F, G, *discretize_lti(F, G, s.sample_interval_s))
