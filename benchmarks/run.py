@@ -105,6 +105,11 @@ def main() -> None:
     report("filter_numpy_loop_s_per_day",
            median_time(lambda: dense_filter(part, disc, x0, P0), repeats=3) * n / k, "s")
 
+    # Issue 6: the whole linearization report of the default scenario (22 two-day runs
+    # and 20 truth-only runs through the one compiled step, five figures).
+    report("linearization_report_wall_s",
+           cli_wall_s("linearization", "goes_next_equinox", repeats=2), "s")
+
 
 if __name__ == "__main__":
     main()
