@@ -212,7 +212,8 @@ def coefficient_section(sc: Spacecraft, orbit: GeoOrbit, H_range_Nms: float | No
            for k, v in freqs.items()}
     return {
         "inputs": {"Ix_kgm2": float(Ix), "Iy_kgm2": float(Iy), "Iz_kgm2": float(Iz),
-                   "products_kgm2": [float(-J[0, 1]), float(-J[0, 2]), float(-J[1, 2])],
+                   "products_kgm2": [float(-J[0, 1]) + 0.0, float(-J[0, 2]) + 0.0,
+                                     float(-J[1, 2]) + 0.0],
                    "I_kgm2": I_, "H_Nms": float(H), "omega0_radps": float(w0),
                    "omega_n_radps": float(wn),
                    "eq6_ratio": float(w0 * (Iy - I_) / H),

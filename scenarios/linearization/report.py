@@ -84,13 +84,14 @@ def verdict(report) -> str:
     coeff = report["coefficients"]
     worst = max(coeff["rows"], key=lambda r: r["rel_eq7_vs_jacobian"])
     eig = coeff["eigenfrequencies"]["eq11c"]
-    parts = [
+    coeff_part = [
         f"Eq. 11's coefficients differ from the exact Jacobian of the nonlinear model by at "
         f"most {100 * worst['rel_eq7_vs_jacobian']:.2g}% ({worst['coefficient']}); Eq. 5 "
         f"(I_x = I_z) causes most of that, while Eq. 6 (dropping ω0(I_y − I)) alone shifts the "
         f"eigenfrequencies, by {100 * eig['rel_slow']:.2g}% (orbit mode) and "
         f"{100 * eig['rel_fast']:.2g}% (nutation).",
     ]
+    parts = []
     a = th[("attitude", "yaw", "10% of filter sigma")]
     r = th[("rate", "yaw", "10% of filter sigma")]
     parts.append(
@@ -131,7 +132,11 @@ def verdict(report) -> str:
             big = max(hyp, key=lambda r: abs(r["contribution"][col]["torque_model_deg"]))
             parts.append(f"Of the effects this scenario does not have, {big['label']} would "
                          f"matter most ({g(abs(big['contribution'][col]['torque_model_deg']))}°).")
-    return " ".join(parts)
+    # The dominant assumption first (budget), then error sizes, then the coefficients.
+    n_budget = 2 if b and any(not r["in_scenario"] for r in b["rows"]) else 1
+    if b:
+        parts = parts[-n_budget:] + parts[:-n_budget]
+    return " ".join(parts + coeff_part)
 
 
 def _delta_text(v) -> str:
