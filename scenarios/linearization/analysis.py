@@ -51,10 +51,9 @@ def _gap(tel, s: Scenario):
     return present, [(int(a), int(b)) for a, b in gaps]
 
 
-def _estimation(s: Scenario, runs, present) -> dict:
+def _estimation(runs, present, gaps) -> dict:
     """Filter on nonlinear and on linear telemetry: yaw at the gap ends and NEES over
     the second half of the run (after the start-up transient)."""
-    _, gaps = _gap(runs.sim.telemetry, s)
     ends = [b for _, b in gaps if b < len(present)]
     err = runs.real.x - runs.truth_model
     err_lin = runs.linear.x - runs.twin_model
@@ -93,6 +92,8 @@ def run_sweep(s: Scenario, progress=None) -> SweepOutput:
             complete = [g for g in gaps if g[1] < len(present)]
             gap = complete[0] if complete else None
             thresholds = _thresholds(s, runs, complete)
+            # The pitch loop's wheel-speed (H) variation, for the eigenfrequency table.
+            thresholds["H_ptp_Nms"] = float(np.ptp(truth.H_Nms))
         x5, u = model_state(truth, wn), model_inputs(truth, dt)
         div, env = {}, {"t_s": truth.t_s[::64]}
         for name, m in models.items():
@@ -108,7 +109,7 @@ def run_sweep(s: Scenario, progress=None) -> SweepOutput:
             env[f"{name}_yaw"] = envelope(e[:, 2] / DEG)
         env["t_s"] = truth.t_s[::64][:len(env["eq11_yaw"])]
         cases.append({"kind": kind, "delta_deg": delta, "overrides": changes,
-                      "divergence": div, "estimation": _estimation(v, runs, present)})
+                      "divergence": div, "estimation": _estimation(runs, present, gaps)})
         envs[(kind, delta)] = env
         del runs, truth
         if progress:

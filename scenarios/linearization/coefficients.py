@@ -171,10 +171,10 @@ def coefficient_section(sc: Spacecraft, orbit: GeoOrbit, H_range_Nms: float | No
     H = raw["H_Nms"]
     eq3, eq7 = _eq3(Ix, Iy, Iz, H, w0), eq7_coefficients(Ix, Iy, Iz, H, w0)
     only5, only6 = eq5_only(Ix, Iy, Iz, H, w0), eq6_only(Ix, Iy, Iz, H, w0)
-    prod = {}
-    for sign in (+1, -1):
-        named, _ = jacobian_coefficients(with_products(sc, sign * PRODUCTS_KGM2), orbit)
-        prod[sign] = named
+    prod, prod_raw = {}, {}
+    for sign in (+1, -1):  # one Jacobian per sign, used by the table and the frequencies
+        prod[sign], prod_raw[sign] = jacobian_coefficients(
+            with_products(sc, sign * PRODUCTS_KGM2), orbit)
     rows = []
     for name in COEFFICIENT_INDEX:
         rows.append({
@@ -193,8 +193,7 @@ def coefficient_section(sc: Spacecraft, orbit: GeoOrbit, H_range_Nms: float | No
     prod_omitted = {}
     freqs = {"jacobian": roll_yaw_frequencies(F_jac), "eq11c": roll_yaw_frequencies(F_11)}
     for sign in (+1, -1):
-        sc_p = with_products(sc, sign * PRODUCTS_KGM2)
-        _, raw_p = jacobian_coefficients(sc_p, orbit)
+        raw_p = prod_raw[sign]
         prod_omitted[f"{sign * PRODUCTS_KGM2:+g}"] = omitted_terms(raw_p["wrt_state"],
                                                                   raw_p["wrt_input"])
         freqs[f"products_{sign * PRODUCTS_KGM2:+g}"] = roll_yaw_frequencies(

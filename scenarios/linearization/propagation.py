@@ -27,6 +27,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from estimator import model as em
+from estimator.transition import discretize
 from sim.linearize import linearize_about_nominal
 
 from .. import build
@@ -105,13 +106,14 @@ def discretize_lti(F: np.ndarray, G: np.ndarray, dt: float) -> tuple[np.ndarray,
     return e[:n, :n], e[:n, n:]
 
 
-def linear_models(s: Scenario) -> dict[str, LinearModel]:
+def linear_models(s: Scenario, names=("eq11", "jacobian")) -> dict[str, LinearModel]:
     """The paper's Eq. 11 model and the exact Jacobian, for this scenario's spacecraft."""
     params, _ = build.estimator_model(s)
     wn, dt = params.omega_n_radps, s.sample_interval_s
-    lin = linearize_about_nominal(build.build_spacecraft(s), build.orbit(s))
-    mats = {"eq11": eq11_matrices(params.omega0_radps, wn, params.H_Nms),
-            "jacobian": model_matrices(lin.wrt_state, lin.wrt_input, wn)}
+    mats = {"eq11": eq11_matrices(params.omega0_radps, wn, params.H_Nms)}
+    if "jacobian" in names:
+        lin = linearize_about_nominal(build.build_spacecraft(s), build.orbit(s))
+        mats["jacobian"] = model_matrices(lin.wrt_state, lin.wrt_input, wn)
     return {k: LinearModel(k, F, G, *discretize_lti(F, G, dt)) for k, (F, G) in mats.items()}
 
 
@@ -146,15 +148,6 @@ def envelope(a: np.ndarray, block: int = ENVELOPE) -> np.ndarray:
     return np.append(env, np.abs(a[n:]).max()) if n < len(a) else env
 
 
-def first_complete_gap(yaw_present: np.ndarray, dt: float, min_h: float):
-    """(start, end) sample indices of the first Sun gap that closes within the run."""
-    from ..outputs import sun_gaps
-    for a, b in sun_gaps(yaw_present, dt, min_h):
-        if b < len(yaw_present):
-            return int(a), int(b)
-    return None
-
-
 def gap_yaw_errors(s: Scenario, truth, gap: tuple[int, int]) -> dict[str, float]:
     """Yaw error (deg) of Eq. 11 propagated across the Sun gap from the truth at its
     start: with the true torques (``dynamics``), and with the paper's torque model
@@ -164,12 +157,11 @@ def gap_yaw_errors(s: Scenario, truth, gap: tuple[int, int]) -> dict[str, float]
     params, noise = build.estimator_model(s)
     dt, wn = s.sample_interval_s, params.omega_n_radps
     x5, u = model_state(truth, wn), model_inputs(truth, dt)
-    eq11 = linear_models_eq11(s)
+    eq11 = linear_models(s, ("eq11",))["eq11"]
     dyn = divergence(x5, u, eq11, a, b)[-1]
     mt = s.estimator.model_torques
     states, _, _ = project_torques(truth.t_s, u[:, 0] - mt.roll_Nm, u[:, 1] - mt.yaw_Nm,
                                    params.omega0_radps)
-    from estimator.transition import discretize
     disc = discretize(params, noise, dt)
     x0 = np.concatenate([x5[a], states[a]])
     uu = em.input_vector(params, mt.roll_Nm, mt.yaw_Nm, u[a:b + 1, 2])
@@ -177,9 +169,3 @@ def gap_yaw_errors(s: Scenario, truth, gap: tuple[int, int]) -> dict[str, float]
     return {"dynamics_deg": float(dyn[2] / DEG), "torque_model_deg": float(tq[2] / DEG),
             "dynamics_roll_deg": float(dyn[0] / DEG),
             "torque_model_roll_deg": float(tq[0] / DEG)}
-
-
-def linear_models_eq11(s: Scenario) -> LinearModel:
-    params, _ = build.estimator_model(s)
-    F, G = eq11_matrices(params.omega0_radps, params.omega_n_radps, params.H_Nms)
-    return LinearModel("eq11", F, G, *discretize_lti(F, G, s.sample_interval_s))

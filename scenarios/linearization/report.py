@@ -36,7 +36,8 @@ def g(v, digits: int = 3) -> str:
 def build_report(s: Scenario, command: str, progress=None) -> tuple[dict, dict]:
     """Run everything; returns the report dictionary and the arrays for the figures."""
     sweep = run_sweep(s, progress)
-    coeff = coefficient_section(build.build_spacecraft(s), build.orbit(s), _H_range(s))
+    coeff = coefficient_section(build.build_spacecraft(s), build.orbit(s),
+                                sweep.thresholds.get("H_ptp_Nms"))
     budget = run_budget(s, sweep.gap, progress=progress) if sweep.gap else None
     report = {
         "meta": {"scenario": s.name, "seed": s.seed, "epoch_utc": s.epoch_utc,
@@ -51,14 +52,6 @@ def build_report(s: Scenario, command: str, progress=None) -> tuple[dict, dict]:
     }
     report["verdict"] = verdict(report)
     return report, {"envelopes": sweep.envelopes}
-
-
-def _H_range(s: Scenario) -> float:
-    """Peak-to-peak H of a short nominal run: the pitch loop's wheel-speed variation."""
-    from ..runner import simulate
-    from .propagation import variant
-    sim = simulate(variant(s, [("duration_s", min(s.duration_s, 21600.0))]))
-    return float(np.ptp(sim.truth.H_Nms))
 
 
 def _sweep_values(report, model: str, key: str, kind: str) -> list[float]:
