@@ -233,10 +233,12 @@ def _inputs(u, n) -> np.ndarray:
 
 
 def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None = None,
-                  chunk: int = 4096) -> FilterResult:
+                  chunk: int = 4096, rows=None) -> FilterResult:
     """Run the filter over every sample.  ``disc`` has Φ, Γ, Q_d for the sample
     interval (``estimator.transition.discretize``); x0, P0 are the prior at the first
-    sample; ``u`` the (N, 9) input vectors of Eq. 12a (zero if None)."""
+    sample; ``u`` the (N, 9) input vectors of Eq. 12a (zero if None).  With ``rows``
+    (increasing sample indices) the history holds only those samples, bit for bit
+    the full run's, without the full history's memory."""
     z, r = meas.z(), meas.r()
     n = len(z)
     x0, P0 = np.asarray(x0, dtype=float), np.asarray(P0, dtype=float)
@@ -245,14 +247,20 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
     engine = _engine("filter", chunk, backend)
     s0 = np.concatenate([x0, pack(0.5 * (P0 + P0.T))])
     present = np.isfinite(z)
-    states, aux = engine.run(s0, [np.where(present, z, 0.0), present.astype(float), r,
-                                  _inputs(u, n)], pack_params(disc))
+    inputs = [np.where(present, z, 0.0), present.astype(float), r, _inputs(u, n)]
+    if rows is None:
+        states, aux = engine.run(s0, inputs, pack_params(disc))
+        last = states[-1]
+    else:
+        rows = np.asarray(rows, dtype=np.int64)
+        last, aux = engine.run_rows(s0, inputs, pack_params(disc), rows)
+        present = present[rows]
     nu = aux[:, N_STATES + N_UT:N_STATES + N_UT + 3]
     S = aux[:, -3:]
     nu[~present] = np.nan
     S[~present] = np.nan
     return FilterResult(aux[:, :N_STATES], aux[:, N_STATES:N_STATES + N_UT], nu, S,
-                        states[-1, :N_STATES], unpack(states[-1, N_STATES:]), engine.backend)
+                        last[:N_STATES], unpack(last[N_STATES:]), engine.backend)
 
 
 def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
