@@ -94,17 +94,19 @@ def propagate_linear(disc, x0, u) -> np.ndarray:
 
 @dataclass(frozen=True)
 class TwoRuns:
-    """Everything a run directory is made of."""
+    """Everything a run directory is made of.  With ``rows`` the filter histories
+    (``real``, ``linear``) hold only those samples; the truth arrays are always full."""
 
     sim: Simulation
-    twin_telemetry: object
+    twin_telemetry: object | None
     params: em.ModelParams
-    truth_model: np.ndarray     # nonlinear truth in model coordinates (N, 9)
-    twin_model: np.ndarray      # linear twin's states (N, 9)
+    truth_model: np.ndarray     # nonlinear truth in the filter's model coordinates (N, 9)
+    twin_model: np.ndarray | None  # linear twin's states, same coordinates (N, 9)
     real: FilterResult
-    linear: FilterResult
+    linear: FilterResult | None
     smoothed: SmootherResult | None
     yaw_factors: np.ndarray
+    rows: np.ndarray | None = None
 
 
 def initial_prior(s: Scenario, params: em.ModelParams) -> tuple[np.ndarray, np.ndarray]:
@@ -146,8 +148,9 @@ def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
 
 
 def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
-                     sun_head=None) -> tuple[FilterResult, np.ndarray]:
-    """Preprocess telemetry arrays and run the filter; returns the result and u."""
+                     sun_head=None, rows=None) -> tuple[FilterResult, np.ndarray]:
+    """Preprocess telemetry arrays and run the filter; returns the result and u
+    (the history only at ``rows`` if given)."""
     e = s.estimator
     if yaw_sigma is not None and sun_head is not None:
         yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
@@ -155,7 +158,7 @@ def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=Non
                      build.estimator_sensor_specs(s), yaw_sigma, e.model_torques.roll_Nm,
                      e.model_torques.yaw_Nm, e.wheel_torque_window_s)
     x0, P0 = initial_prior(s, params)
-    return kalman_filter(inputs.measurements, disc, x0, P0, u=inputs.u), inputs.u
+    return kalman_filter(inputs.measurements, disc, x0, P0, u=inputs.u, rows=rows), inputs.u
 
 
 REQUIRED_TELEMETRY = ("t_s", "roll_deg", "pitch_deg", "yaw_deg", "wheel1_rpm", "wheel2_rpm")
@@ -179,33 +182,45 @@ def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]):
     return cols["roll_deg"] * DEG, cols["yaw_deg"] * DEG, speeds, sigma, head
 
 
-def run_scenario(s: Scenario, sim: Simulation | None = None,
-                 telemetry_columns: dict[str, np.ndarray] | None = None, run: int = 0,
-                 smooth: bool = True) -> TwoRuns:
-    """Both runs.  ``telemetry_columns`` (telemetry.csv read back) makes the real
-    filter see exactly the file's values, so that ``dynprop estimate`` on that file
-    reproduces the estimates bit for bit.  ``smooth=False`` skips the smoother
-    (``smoothed`` is None) for analyses that need only the filters."""
-    sim = sim or simulate(s, run)
-    truth, tel, dt = sim.truth, sim.telemetry, s.sample_interval_s
-    params, noise = build.estimator_model(s)
-    disc = discretize(params, noise, dt)
-    wn, w0 = params.omega_n_radps, params.omega0_radps
+@dataclass(frozen=True)
+class TruthTorques:
+    """The truth's Euler rates, and its external roll/yaw torques less the modelled
+    N_x*, N_z*, split into the torque states' fit and the residual (Eqs. 9, 18).
+    None of it depends on the spacecraft's ω_n, so one serves every model."""
 
-    # Nonlinear truth in the model's coordinates.
-    rates = euler_rates(truth.euler_rad, truth.w_br_radps)
+    rates: np.ndarray        # (ψ̇, φ̇, θ̇), rad/s
+    torque_states: np.ndarray
+    res_x: np.ndarray
+    res_z: np.ndarray
+
+
+def truth_torques(truth, model_torques, omega0_radps: float) -> TruthTorques:
     ext = sum(truth.torques[k] for k in EXTERNAL)
-    mt = s.estimator.model_torques
-    torque_states, res_x, res_z = project_torques(truth.t_s, ext[:, 0] - mt.roll_Nm,
-                                                  ext[:, 2] - mt.yaw_Nm, w0)
-    truth_model = np.column_stack([truth.roll_rad, rates[:, 1] / wn, truth.yaw_rad,
-                                   rates[:, 0] / wn, truth.h_Nms, torque_states])
+    mt = model_torques
+    states, res_x, res_z = project_torques(truth.t_s, ext[:, 0] - mt.roll_Nm,
+                                           ext[:, 2] - mt.yaw_Nm, omega0_radps)
+    return TruthTorques(euler_rates(truth.euler_rad, truth.w_br_radps), states, res_x, res_z)
 
-    # The linear twin: same start, same torques (fit in the states, residual and the
-    # true wheel torque as inputs; N_w averaged over each step is exact for h).
-    nw_true = np.append(np.diff(truth.h_Nms) / dt, 0.0)
-    u_twin = em.input_vector(params, mt.roll_Nm + res_x, mt.yaw_Nm + res_z, nw_true)
-    twin = propagate_linear(disc, truth_model[0], u_twin)
+
+def model_truth(params: em.ModelParams, truth, tt: TruthTorques) -> np.ndarray:
+    """The nonlinear truth in the coordinates of the model ``params`` (N, 9)."""
+    wn = params.omega_n_radps
+    return np.column_stack([truth.roll_rad, tt.rates[:, 1] / wn, truth.yaw_rad,
+                            tt.rates[:, 0] / wn, truth.h_Nms, tt.torque_states])
+
+
+def linear_twin(s: Scenario, truth, run: int, model_torques, tt: TruthTorques):
+    """The paper's model of the spacecraft of ``s`` (Eq. 11) propagated exactly from the
+    truth's initial deviation under the same torques (fit in the states, residual and
+    the true N_w as inputs; N_w averaged over each step is exact for h), and sensed
+    with the same seeded noise draws.  Returns its states in the coordinates of ``s``'s
+    model, its telemetry and the model."""
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, s.sample_interval_s)
+    mt = model_torques
+    nw_true = np.append(np.diff(truth.h_Nms) / s.sample_interval_s, 0.0)
+    u_twin = em.input_vector(params, mt.roll_Nm + tt.res_x, mt.yaw_Nm + tt.res_z, nw_true)
+    twin = propagate_linear(disc, model_truth(params, truth, tt)[0], u_twin)
     k = build.yaw_factors(s)
     speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms, k / (k @ k))
     c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)
@@ -213,19 +228,56 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
         t_s=truth.t_s, roll_rad=twin[:, em.R], pitch_rad=truth.pitch_rad,
         wheel_speeds_radps=speeds, shadow=truth.shadow, sun_orbit_frame=truth.sun_orbit_frame,
         sun_body=np.einsum("nij,nj->ni", c_br, truth.sun_orbit_frame))
-    suite = build.build_sensors(s)
     # Fresh generators from the same seed: the twin's noise draws equal the real ones.
-    twin_tel = make_telemetry(twin_truth, suite, build.streams(s.seed, run),
+    twin_tel = make_telemetry(twin_truth, build.build_sensors(s), build.streams(s.seed, run),
                               s.sensors.sun.min_sun_separation_deg)
+    return twin, twin_tel, params
+
+
+def run_scenario(s: Scenario, sim: Simulation | None = None,
+                 telemetry_columns: dict[str, np.ndarray] | None = None, run: int = 0,
+                 smooth: bool = True, truth_scenario: Scenario | None = None,
+                 rows=None, twin: bool = True) -> TwoRuns:
+    """Both runs.  ``telemetry_columns`` (telemetry.csv read back) makes the real
+    filter see exactly the file's values, so that ``dynprop estimate`` on that file
+    reproduces the estimates bit for bit.  ``smooth=False`` skips the smoother
+    (``smoothed`` is None) for analyses that need only the filters.
+
+    ``truth_scenario`` (default ``s``) is the spacecraft that flies: a Monte Carlo
+    case's dispersed scenario.  The filter is always designed from ``s``, the
+    nominal one, as it would be in flight; the linear twin is the paper's model of
+    the spacecraft that flies.  ``rows`` keeps only those samples of the filter
+    histories (no smoother); ``twin=False`` skips the linear twin."""
+    truth_scenario = truth_scenario or s
+    if smooth and rows is not None:
+        raise ValueError("the smoother needs the full filter history (rows=None)")
+    sim = sim or simulate(truth_scenario, run)
+    truth, tel, dt = sim.truth, sim.telemetry, s.sample_interval_s
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, dt)
+    mt = s.estimator.model_torques
+    tt = truth_torques(truth, mt, params.omega0_radps)
+    truth_model = model_truth(params, truth, tt)
 
     if telemetry_columns is None:
         head = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
         measured = (tel.roll_rad, tel.yaw_rad, tel.wheel_speeds_radps, tel.yaw_sigma_rad, head)
     else:
         measured = telemetry_inputs(s, telemetry_columns)
-    real, u = filter_telemetry(s, params, disc, *measured)
-    twin_head = np.where(twin_tel.yaw_head >= 0, twin_tel.yaw_head, np.nan)
-    linear, _ = filter_telemetry(s, params, disc, twin_tel.roll_rad, twin_tel.yaw_rad,
-                                 twin_tel.wheel_speeds_radps, twin_tel.yaw_sigma_rad, twin_head)
+    real, u = filter_telemetry(s, params, disc, *measured, rows=rows)
+    twin_model = twin_tel = linear = None
+    if twin:
+        twin_model, twin_tel, twin_params = linear_twin(truth_scenario, truth, run,
+                                                            mt, tt)
+        if twin_params != params:
+            # The twin's rate states are ṙ/ω_n of its own spacecraft; the filter's use
+            # the nominal ω_n.
+            twin_model = twin_model.copy()
+            twin_model[:, [1, 3]] *= twin_params.omega_n_radps / params.omega_n_radps
+        twin_head = np.where(twin_tel.yaw_head >= 0, twin_tel.yaw_head, np.nan)
+        linear, _ = filter_telemetry(s, params, disc, twin_tel.roll_rad, twin_tel.yaw_rad,
+                                     twin_tel.wheel_speeds_radps, twin_tel.yaw_sigma_rad,
+                                     twin_head, rows=rows)
     smoothed = rts_smoother(real, disc, u=u) if smooth else None
-    return TwoRuns(sim, twin_tel, params, truth_model, twin, real, linear, smoothed, k)
+    return TwoRuns(sim, twin_tel, params, truth_model, twin_model, real, linear, smoothed,
+                   build.yaw_factors(s), None if rows is None else np.asarray(rows))
