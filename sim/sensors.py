@@ -12,6 +12,14 @@ body on the orbit frame, the Sun is at ŝ = (−sin θ, 0, −cos θ), overhead 
 noon, along −x at dusk, at nadir (+z) at midnight.  The head measures two angles
 of the Sun, α in that plane (towards increasing θ) and β out of it (along +y):
 α = atan2(ŝ·u, ŝ·b), β = atan2(ŝ·ŷ, ŝ·b), with u = (−cos θ_b, 0, sin θ_b).
+
+Biases.  Every sensor can carry a constant bias, an error the ground does not
+know (the ground yaw does not correct for it), so that Monte Carlo runs can
+disperse it.  The convention is the same for all of them, in the sensor's own
+unit: measured = quantise(true + bias + noise).  A bias is added only when it is
+non-zero, so a zero bias leaves every output bit-for-bit as without one.  It
+shifts the reading only: what a Sun head sees (its field of view, and a CASS's
+noise growth off the boresight) follows the true Sun direction.
 """
 
 from __future__ import annotations
@@ -29,12 +37,25 @@ def quantize(x: np.ndarray, quantum: float) -> np.ndarray:
     return np.round(np.asarray(x) / quantum) * quantum
 
 
+def _check_finite(what: str, spec, names: tuple[str, ...]) -> None:
+    # A NaN bias is truthy and would silently turn every reading into NaN.
+    for name in names:
+        if not np.isfinite(getattr(spec, name)):
+            raise ValueError(f"{what}: {name} must be finite")
+
+
 @dataclass(frozen=True)
 class EarthSensor:
-    """Roll and pitch: 0.01° (1σ) noise and 0.01° quantisation (Section 2.1)."""
+    """Roll and pitch: 0.01° (1σ) noise and 0.01° quantisation (Section 2.1), plus
+    constant biases (not in the paper; 0 by default)."""
 
     noise_deg: float = 0.01
     quantum_deg: float = 0.01
+    roll_bias_deg: float = 0.0
+    pitch_bias_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_finite("earth sensor", self, ("roll_bias_deg", "pitch_bias_deg"))
 
 
 @dataclass(frozen=True)
@@ -44,6 +65,10 @@ class SunSensorHead:
     Noise on each angle is ``noise_deg`` for a DSS.  For a CASS it is
     ``noise_deg / cos(γ)``, γ the angle off the boresight: about 1° on the
     boresight, growing away from it (Section 2.1 gives no more than that).
+    ``in_plane_bias_deg`` and ``out_of_plane_bias_deg`` are constant errors on α and β
+    (0 by default).  Near zero attitude an α bias moves the ground yaw by
+    tan δ cos θ_b / (cos α (sin²θ + tan²δ)) per unit (δ the Sun's declination): not at all
+    for the DSS (θ_b = 90°, u is the yaw axis), whose yaw error is its β bias alone.
     """
 
     name: str
@@ -53,8 +78,12 @@ class SunSensorHead:
     fov_out_of_plane_deg: float
     quantum_deg: float
     noise_deg: float
+    in_plane_bias_deg: float = 0.0
+    out_of_plane_bias_deg: float = 0.0
 
     def __post_init__(self) -> None:
+        _check_finite(f"sun sensor {self.name}", self,
+                      ("in_plane_bias_deg", "out_of_plane_bias_deg"))
         if self.kind not in ("dss", "cass"):
             raise ValueError(f"sun sensor {self.name}: kind must be 'dss' or 'cass'")
         for name in ("fov_in_plane_deg", "fov_out_of_plane_deg"):
@@ -92,10 +121,15 @@ def goes_next_sun_sensors() -> tuple[SunSensorHead, ...]:
 
 @dataclass(frozen=True)
 class Tachometer:
-    """Wheel speed: 0.0163 rpm quantisation, 0.0978 rpm (3σ) noise (Section 2.3)."""
+    """Wheel speed: 0.0163 rpm quantisation, 0.0978 rpm (3σ) noise (Section 2.3), plus
+    a constant bias, the same on every wheel (not in the paper; 0 by default)."""
 
     quantum_rpm: float = 0.0163
     noise_3sigma_rpm: float = 0.0978
+    bias_rpm: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_finite("tachometer", self, ("bias_rpm",))
 
 
 @dataclass(frozen=True)
@@ -125,20 +159,28 @@ def _noise(rng, shape, sigma, enabled: bool) -> np.ndarray:
     return sigma * rng.standard_normal(shape)
 
 
+def _biased(x: np.ndarray, bias: float) -> np.ndarray:
+    """x + bias; x itself when the bias is zero, so that the result stays bit-identical
+    to a sensor without one (adding 0.0 would turn −0.0 into +0.0)."""
+    return x + bias if bias else x
+
+
 def earth_sensor(roll_rad, pitch_rad, spec: EarthSensor, rng, noise_enabled=True):
-    """Quantised, noisy roll and pitch (rad)."""
+    """Quantised, noisy roll and pitch (rad): Q(true + bias + noise), in degrees."""
     n = len(roll_rad)
     e = _noise(rng, (n, 2), spec.noise_deg, noise_enabled)
     q = spec.quantum_deg
-    return (quantize(np.asarray(roll_rad) / DEG + e[:, 0], q) * DEG,
-            quantize(np.asarray(pitch_rad) / DEG + e[:, 1], q) * DEG)
+    roll = _biased(np.asarray(roll_rad) / DEG, spec.roll_bias_deg)
+    pitch = _biased(np.asarray(pitch_rad) / DEG, spec.pitch_bias_deg)
+    return quantize(roll + e[:, 0], q) * DEG, quantize(pitch + e[:, 1], q) * DEG
 
 
 def tachometers(speeds_radps, spec: Tachometer, rng, noise_enabled=True) -> np.ndarray:
-    """Quantised, noisy wheel speeds (rad/s), one column per wheel."""
+    """Quantised, noisy wheel speeds (rad/s), one column per wheel: Q(true + bias + noise),
+    in rpm."""
     speeds = np.asarray(speeds_radps)
     e = _noise(rng, speeds.shape, spec.noise_3sigma_rpm / 3.0, noise_enabled)
-    return quantize(speeds / RPM + e, spec.quantum_rpm) * RPM
+    return quantize(_biased(speeds / RPM, spec.bias_rpm) + e, spec.quantum_rpm) * RPM
 
 
 def sun_sensors(sun_body: np.ndarray, lit: np.ndarray, heads, rngs, noise_enabled=True
@@ -146,7 +188,8 @@ def sun_sensors(sun_body: np.ndarray, lit: np.ndarray, heads, rngs, noise_enable
     """Readings of every head from the true Sun direction in body axes.
 
     A head sees the Sun when the Sun is in front of it, within both field-of-view
-    half angles, and not eclipsed (``lit``).
+    half angles, and not eclipsed (``lit``); both tests use the true angles.  Each
+    reading is Q(true + bias + noise), in degrees.
     """
     n = len(sun_body)
     visible = np.zeros((n, len(heads)), dtype=bool)
@@ -168,6 +211,8 @@ def sun_sensors(sun_body: np.ndarray, lit: np.ndarray, heads, rngs, noise_enable
         sigma = head.noise_deg if head.kind == "dss" else head.noise_deg / sb[idx]
         q = head.quantum_deg
         visible[idx, k] = True
-        alpha[idx, k] = quantize(a_true / DEG + sigma * e[idx, 0], q) * DEG
-        beta[idx, k] = quantize(b_true / DEG + sigma * e[idx, 1], q) * DEG
+        a_deg = _biased(a_true / DEG, head.in_plane_bias_deg)
+        b_deg = _biased(b_true / DEG, head.out_of_plane_bias_deg)
+        alpha[idx, k] = quantize(a_deg + sigma * e[idx, 0], q) * DEG
+        beta[idx, k] = quantize(b_deg + sigma * e[idx, 1], q) * DEG
     return SunReadings(visible, alpha, beta)

@@ -18,6 +18,7 @@ References used here, none of them the code's own output:
 
 from __future__ import annotations
 
+from dataclasses import replace
 from datetime import datetime
 
 import numpy as np
@@ -27,7 +28,7 @@ from scenarios.build import build_sensors, streams
 from scenarios.runner import simulate
 from scenarios.schema import Scenario
 from sim import ephemeris
-from sim.sensors import SensorSuite
+from sim.sensors import EarthSensor, SensorSuite, Tachometer
 from sim.telemetry import make_telemetry
 from sim.truth import InitialState, simulate_truth
 
@@ -587,3 +588,240 @@ def test_ground_yaw_recovers_a_two_degree_offset_noise_on(yaw_offset_truth):
     assert np.max(np.abs(truth.yaw_rad[use])) / DEG > 1.3
     assert np.all(np.abs(tel.yaw_rad[use]) / DEG > 1.2)
     assert np.all(np.sign(tel.yaw_rad[use]) == np.sign(truth.yaw_rad[use]))
+
+
+# ------------------------------------------------------------ 8. constant sensor biases
+#
+# Convention (sim.sensors): measured = quantise(true + bias + noise), in the sensor's unit.
+# With the same random streams the noise draws are the same with and without a bias, so
+# where the bias is a whole number of quanta the quantised reading moves by exactly the
+# bias; other biases are checked on the mean, where noise σ ≥ q dithers the quantiser.
+
+
+def _suite(earth=None, tach=None, **head_biases) -> SensorSuite:
+    """The default suite with biases: ``head_biases`` maps a head name to its
+    (in-plane, out-of-plane) biases in degrees."""
+    base = SensorSuite()
+    heads = tuple(replace(h, in_plane_bias_deg=head_biases.get(h.name, (0.0, 0.0))[0],
+                          out_of_plane_bias_deg=head_biases.get(h.name, (0.0, 0.0))[1])
+                  for h in base.sun_heads)
+    return replace(base, earth=earth or base.earth, tachometer=tach or base.tachometer,
+                   sun_heads=heads)
+
+
+def _noise_off(suite: SensorSuite) -> SensorSuite:
+    return replace(suite, noise_enabled=False)
+
+
+@pytest.fixture(scope="module")
+def zero_attitude_solstice(spacecraft, orbit, quiet):
+    """Torque-free, control off, body on the orbit frame (attitude exactly 0) for a day at
+    the June solstice, where the Sun is 23.4° out of the orbit plane."""
+    env, ctrl = quiet
+    truth = simulate_truth(spacecraft, orbit, env, ctrl, InitialState(),
+                           ephemeris.parse_epoch(SOLSTICE_UTC), DAY_S)
+    assert np.max(np.abs(truth.euler_rad)) < 1e-12
+    return truth
+
+
+def test_earth_sensor_bias_shifts_the_quantised_reading_by_whole_quanta(equinox_day):
+    """Roll bias +0.03° and pitch bias −0.05° (3 and −5 quanta of 0.01°), same noise draws:
+    every reading moves by exactly the bias, noise on or off."""
+    truth, seed = equinox_day.truth, equinox_day.scenario.seed
+    biased = _suite(earth=EarthSensor(roll_bias_deg=0.03, pitch_bias_deg=-0.05))
+    for on in (True, False):
+        a = make_telemetry(truth, replace(SensorSuite(), noise_enabled=on), streams(seed))
+        b = make_telemetry(truth, replace(biased, noise_enabled=on), streams(seed))
+        np.testing.assert_allclose((b.roll_rad - a.roll_rad) / DEG, 0.03, rtol=0, atol=1e-9)
+        np.testing.assert_allclose((b.pitch_rad - a.pitch_rad) / DEG, -0.05, rtol=0, atol=1e-9)
+
+
+def test_earth_sensor_bias_is_the_mean_error_with_noise_on(equinox_day):
+    """A bias that is not a whole quantum (roll +0.0037°, pitch −0.0061°): σ = q = 0.01°
+    dithers the quantiser (Sheppard, residual ≤ exp(−2π²) = 3e-9 of q), so the mean of
+    measured − true is the bias, within the 99.9 % interval Z·sqrt((σ² + q²/12)/n)
+    (≈ 8e-5° for n = 168 750), far below the bias itself."""
+    truth, seed = equinox_day.truth, equinox_day.scenario.seed
+    roll_b, pitch_b = 0.0037, -0.0061
+    tel = make_telemetry(truth, _suite(earth=EarthSensor(roll_bias_deg=roll_b,
+                                                         pitch_bias_deg=pitch_b)), streams(seed))
+    for meas, true, bias in ((tel.roll_rad, truth.roll_rad, roll_b),
+                             (tel.pitch_rad, truth.pitch_rad, pitch_b)):
+        err = (meas - true) / DEG
+        tol = Z999 * np.sqrt((0.01**2 + 0.01**2 / 12) / err.size)
+        assert tol < abs(bias) / 20
+        assert abs(err.mean() - bias) < tol, (err.mean(), bias)
+        # The spread is unchanged: a bias is not noise.
+        _check_noise_plus_quantisation(err - bias, 0.01, 0.01)
+
+
+def test_tachometer_bias_shifts_every_wheel_in_rad_per_s(equinox_day):
+    """Noise off, bias 3 quanta = 0.0489 rpm: every wheel speed moves by exactly
+    0.0489 · 2π/60 = 5.1208e-3 rad/s (hand value).  Noise on, bias 0.005 rpm (under a third
+    of a quantum; σ = 0.0326 rpm = 2q dithers it): the mean speed error per wheel is
+    0.005 rpm = 5.236e-4 rad/s within Z·sqrt((σ² + q²/12)/n) (≈ 2.6e-4 rpm)."""
+    truth, seed = equinox_day.truth, equinox_day.scenario.seed
+    a = make_telemetry(truth, _noise_off(SensorSuite()), streams(seed))
+    b = make_telemetry(truth, _noise_off(_suite(tach=Tachometer(bias_rpm=3 * 0.0163))),
+                       streams(seed))
+    shift = b.wheel_speeds_radps - a.wheel_speeds_radps
+    assert shift.shape[1] == 2
+    np.testing.assert_allclose(shift, 5.1208e-3, rtol=1e-4)
+    np.testing.assert_allclose(shift, 3 * 0.0163 * RPM, rtol=0, atol=1e-12)
+
+    tel = make_telemetry(truth, _suite(tach=Tachometer(bias_rpm=0.005)), streams(seed))
+    err = tel.wheel_speeds_radps - truth.wheel_speeds_radps
+    sigma, q = 0.0978 / 3, 0.0163
+    tol = Z999 * np.sqrt((sigma**2 + q**2 / 12) / err.shape[0])
+    assert tol < 0.005 / 10
+    for w in range(2):
+        assert abs(err[:, w].mean() / RPM - 0.005) < tol, w
+        assert err[:, w].mean() == pytest.approx(5.236e-4, rel=0.06)
+
+
+def test_sun_head_biases_shift_alpha_and_beta_but_not_visibility(equinox_day):
+    """Noise off, each head biased by whole quanta on both angles (opposite signs): where a
+    head sees the Sun its α and β move by exactly the bias; the field of view is geometric,
+    so visibility does not change."""
+    truth = equinox_day.truth
+    biases = {name: (4 * HEADS[name][3], -2 * HEADS[name][3]) for name in HEAD_ORDER}
+    a = make_telemetry(truth, _noise_off(SensorSuite()), streams(0))
+    b = make_telemetry(truth, _noise_off(_suite(**biases)), streams(0))
+    assert np.array_equal(a.sun.visible, b.sun.visible)
+    for k, name in enumerate(HEAD_ORDER):
+        vis = a.sun.visible[:, k]
+        assert vis.sum() > 10_000
+        for got, ref, bias in ((b.sun.alpha_rad, a.sun.alpha_rad, biases[name][0]),
+                               (b.sun.beta_rad, a.sun.beta_rad, biases[name][1])):
+            np.testing.assert_allclose((got[vis, k] - ref[vis, k]) / DEG, bias, rtol=0,
+                                       atol=1e-9, err_msg=name)
+
+
+def test_dss_out_of_plane_bias_is_a_yaw_error_of_the_same_size(zero_attitude_solstice):
+    """The DSS (boresight −x, u = +z) gives the measured direction ∝ (−1, tan β, tan α),
+    whose azimuth is π − β; with zero roll and pitch the ground yaw is az(ŝ_R) − (π − β), so
+    a β bias Δβ is a yaw error of exactly +Δβ, at any hour angle and season.  Δβ = 0.25°
+    (2 quanta), noise off, attitude 0."""
+    truth = zero_attitude_solstice
+    dss = HEAD_ORDER.index("dss")
+    a = make_telemetry(truth, _noise_off(SensorSuite()), streams(0))
+    b = make_telemetry(truth, _noise_off(_suite(dss=(0.0, 0.25))), streams(0))
+    use = (a.yaw_head == dss) & (b.yaw_head == dss)
+    assert use.sum() > 10_000
+    np.testing.assert_allclose(_wrap_deg((b.yaw_rad[use] - a.yaw_rad[use]) / DEG), 0.25,
+                               rtol=0, atol=1e-9)
+
+
+def test_dss_in_plane_bias_does_not_move_the_ground_yaw(zero_attitude_solstice, equinox_day):
+    """Same geometry: the DSS's α only sets the z component of the measured direction, i.e.
+    the Sun's elevation from the yaw axis, never its azimuth.  So with zero roll and pitch an
+    in-plane bias (here 1° = 8 quanta) leaves the ground yaw unchanged (to rounding); with
+    the attitude under control (|roll|, |pitch| < 0.1°) the de-rotation couples it in only
+    through sin(roll) · δ(s_z) ≤ 0.00175 · 0.0175 rad, over a horizontal Sun component
+    ≥ sin 58° (the DSS sees θ = 58°…122°): ≤ 3.6e-5 rad = 0.0021° (bound by hand)."""
+    dss = HEAD_ORDER.index("dss")
+    truth = zero_attitude_solstice
+    a = make_telemetry(truth, _noise_off(SensorSuite()), streams(0))
+    b = make_telemetry(truth, _noise_off(_suite(dss=(1.0, 0.0))), streams(0))
+    use = (a.yaw_head == dss) & (b.yaw_head == dss)
+    assert use.sum() > 10_000
+    assert np.max(np.abs(b.yaw_rad[use] - a.yaw_rad[use])) < 1e-12
+    # And the readings really did move: α by 1°.
+    np.testing.assert_allclose((b.sun.alpha_rad[use, dss] - a.sun.alpha_rad[use, dss]) / DEG,
+                               1.0, rtol=0, atol=1e-9)
+
+    truth, seed = equinox_day.truth, equinox_day.scenario.seed
+    a = make_telemetry(truth, SensorSuite(), streams(seed))
+    b = make_telemetry(truth, _suite(dss=(1.0, 0.0)), streams(seed))
+    use = (a.yaw_head == dss) & (b.yaw_head == dss)
+    assert use.sum() > 10_000
+    assert np.max(np.abs(truth.euler_rad)) / DEG < ATT_MAX_DEG
+    assert np.max(np.abs(b.yaw_rad[use] - a.yaw_rad[use])) / DEG < 0.0021
+
+
+def test_cass_in_plane_bias_gives_the_hand_derived_yaw_error(zero_attitude_solstice):
+    """A head at boresight hour angle θ_b sees the Sun ŝ = (−sin θ cos δ, −sin δ, −cos θ cos δ)
+    at α = θ − θ_b, tan β = −tan δ / cos α.  The ground's direction b + tan α u + tan β ŷ is
+    ∝ (−sin θ, cos α tan β, −cos θ) (since b cos α + u sin α is the boresight at θ), with
+    azimuth atan2(cos α tan β, −sin θ).  Perturbing α by Δα at fixed β and differentiating,
+    the yaw error (ground − true = −δ azimuth) is
+
+        δψ = tan δ · cos θ_b / (cos α · (sin²θ + tan²δ)) · Δα.
+
+    (For the DSS cos θ_b = 0: no yaw error, the test above.)  cass2 (θ_b = 15°) at the June
+    solstice (δ = +23.4°), Δα = +0.195° (5 quanta), noise off, attitude 0: the factor is
+    positive, from 1/tan δ = 2.31 at noon (θ = 0, where α = −θ_b) down to 0.63 at the far
+    edge (θ = 60°), so the yaw error has the bias's sign and up to 2.3 times its size.
+    Tolerance: the neglected second-order term, ≤ Δα · |d ln factor/dθ| ≲ 0.2 %, taken as
+    1 %."""
+    truth = zero_attitude_solstice
+    k = HEAD_ORDER.index("cass2")
+    d_alpha = 5 * HEADS["cass2"][3]
+    a = make_telemetry(truth, _noise_off(SensorSuite()), streams(0))
+    b = make_telemetry(truth, _noise_off(_suite(cass2=(d_alpha, 0.0))), streams(0))
+    use = (a.yaw_head == k) & (b.yaw_head == k)
+    assert use.sum() > 10_000
+    s = truth.sun_orbit_frame[use]
+    dec = np.arcsin(-s[:, 1])
+    theta = np.arctan2(-s[:, 0], -s[:, 2])
+    alpha = theta - HEADS["cass2"][0] * DEG
+    assert np.all(dec / DEG > 23.0)
+    factor = np.tan(dec) * np.cos(HEADS["cass2"][0] * DEG) / (
+        np.cos(alpha) * (np.sin(theta) ** 2 + np.tan(dec) ** 2))
+    assert factor.min() == pytest.approx(0.63, abs=0.01)
+    assert factor.max() == pytest.approx(1 / np.tan(23.44 * DEG), abs=0.01)
+    got = _wrap_deg((b.yaw_rad[use] - a.yaw_rad[use]) / DEG)
+    assert np.all(got > 0)
+    np.testing.assert_allclose(got, factor * d_alpha, rtol=0.01)
+
+
+def test_dss_out_of_plane_bias_shifts_the_yaw_error_closed_loop(equinox_day):
+    """Closed loop, noise on (same draws), equinox: a DSS β bias of 0.25° (2 quanta) moves
+    every DSS ground yaw, and so the mean yaw error, by +0.25°.  Off zero attitude the
+    de-rotation tilts the measured direction by the roll and pitch (≤ 0.1°, checked), so
+    ∂ψ/∂β departs from 1 by about attitude · tan α ≤ 0.0017 · tan 32° ≈ 1e-3: ≤ 2.5e-4° on
+    0.25°; allowed 1e-3°."""
+    truth, seed = equinox_day.truth, equinox_day.scenario.seed
+    assert np.max(np.abs(truth.euler_rad)) / DEG < ATT_MAX_DEG
+    dss = HEAD_ORDER.index("dss")
+    a = make_telemetry(truth, SensorSuite(), streams(seed))
+    b = make_telemetry(truth, _suite(dss=(0.0, 0.25)), streams(seed))
+    use = (a.yaw_head == dss) & (b.yaw_head == dss)
+    assert use.sum() > 10_000
+    shift = _wrap_deg((b.yaw_rad[use] - a.yaw_rad[use]) / DEG)
+    np.testing.assert_allclose(shift, 0.25, rtol=0, atol=1e-3)
+    err_a = _wrap_deg((a.yaw_rad[use] - truth.yaw_rad[use]) / DEG)
+    err_b = _wrap_deg((b.yaw_rad[use] - truth.yaw_rad[use]) / DEG)
+    assert err_b.mean() - err_a.mean() == pytest.approx(0.25, abs=1e-3)
+
+
+def test_zero_biases_are_bit_identical_to_no_biases(equinox_day):
+    """Explicit zero biases (−0.0 too) give the very same bytes as the defaults, noise on
+    and off (a zero bias is never added)."""
+    truth, seed = equinox_day.truth, equinox_day.scenario.seed
+    zeros = _suite(earth=EarthSensor(roll_bias_deg=0.0, pitch_bias_deg=-0.0),
+                   tach=Tachometer(bias_rpm=-0.0), dss=(0.0, -0.0), cass1=(-0.0, 0.0),
+                   cass2=(0.0, 0.0))
+    for on in (True, False):
+        a = make_telemetry(truth, replace(SensorSuite(), noise_enabled=on), streams(seed))
+        b = make_telemetry(truth, replace(zeros, noise_enabled=on), streams(seed))
+        for key, arr in telemetry_arrays(a).items():
+            assert bit_identical(arr, telemetry_arrays(b)[key]), (key, on)
+    # And through the scenario: zero keys build the default suite.
+    s = Scenario(name="zero-bias", sensors={
+        "earth": {"roll_bias_deg": 0.0, "pitch_bias_deg": 0.0},
+        "tachometer": {"bias_rpm": 0.0},
+        "sun": {"dss": {"in_plane_bias_deg": 0.0, "out_of_plane_bias_deg": 0.0}}})
+    assert build_sensors(s) == SensorSuite()
+
+
+@pytest.mark.parametrize("make", [
+    lambda: EarthSensor(roll_bias_deg=np.nan),
+    lambda: EarthSensor(pitch_bias_deg=np.inf),
+    lambda: Tachometer(bias_rpm=np.nan),
+    lambda: replace(SensorSuite().sun_heads[0], in_plane_bias_deg=np.nan),
+    lambda: replace(SensorSuite().sun_heads[1], out_of_plane_bias_deg=-np.inf),
+])
+def test_non_finite_biases_are_rejected(make):
+    with pytest.raises(ValueError, match="bias"):
+        make()
