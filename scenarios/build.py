@@ -20,6 +20,10 @@ DEG = np.pi / 180.0
 # would give, but independent of which sensors a scenario configures, so that
 # changing one sensor never moves another's noise.
 STREAMS = ("ripple", "earth", "tachometer", "dss", "cass1", "cass2")
+# Monte Carlo case k draws its dispersed values from SeedSequence(seed, spawn_key=
+# (k, DISPERSION_STREAM, crc32(key))): case k's own child, one stream per key, so
+# adding a dispersion never moves another key's draw.
+DISPERSION_STREAM = len(STREAMS)
 
 
 def streams(seed: int, run: int = 0) -> dict[str, np.random.Generator]:
@@ -73,15 +77,18 @@ def build_initial(s: Scenario) -> InitialState:
 
 def _head(name: str, h: SunHead) -> sensors.SunSensorHead:
     return sensors.SunSensorHead(name, h.kind, h.boresight_hour_angle_deg, h.fov_in_plane_deg,
-                                 h.fov_out_of_plane_deg, h.quantum_deg, h.noise_deg)
+                                 h.fov_out_of_plane_deg, h.quantum_deg, h.noise_deg,
+                                 h.in_plane_bias_deg, h.out_of_plane_bias_deg)
 
 
 def build_sensors(s: Scenario) -> sensors.SensorSuite:
     c = s.sensors
     return sensors.SensorSuite(
-        sensors.EarthSensor(c.earth.noise_deg, c.earth.quantum_deg),
+        sensors.EarthSensor(c.earth.noise_deg, c.earth.quantum_deg, c.earth.roll_bias_deg,
+                            c.earth.pitch_bias_deg),
         (_head("dss", c.sun.dss), _head("cass1", c.sun.cass1), _head("cass2", c.sun.cass2)),
-        sensors.Tachometer(c.tachometer.quantum_rpm, c.tachometer.noise_3sigma_rpm),
+        sensors.Tachometer(c.tachometer.quantum_rpm, c.tachometer.noise_3sigma_rpm,
+                           c.tachometer.bias_rpm),
         c.noise.enabled)
 
 

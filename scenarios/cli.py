@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -33,6 +34,28 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
                    help="override any scenario key (repeatable); VALUE is YAML")
 
 
+def _whole(text: str, minimum: int) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"{value} must be at least {minimum}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    return _whole(text, 1)
+
+
+def _case_number(text: str) -> int:
+    return _whole(text, 0)
+
+
+def _case_list(text: str) -> tuple[int, ...]:
+    return tuple(_case_number(part) for part in text.split(",") if part.strip())
+
+
 def _build_parser() -> argparse.ArgumentParser:
     from . import __version__
     parser = _Parser(
@@ -51,6 +74,25 @@ def _build_parser() -> argparse.ArgumentParser:
     _scenario_args(run)
     run.add_argument("--out", type=Path, help="new run directory (default runs/NAME-TIME)")
     run.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    run.add_argument("--montecarlo-case", type=_case_number, metavar="K",
+                     help="fly Monte Carlo case K of the scenario's dispersions (the filter "
+                     "stays nominal), reproducing `dynprop montecarlo`'s case K bit for bit")
+    mc = sub.add_parser("montecarlo", help="dispersed Monte Carlo set: ensemble errors, "
+                        "averaged NEES, yaw at the Sun-gap end; resumable")
+    _scenario_args(mc)
+    mc.add_argument("--runs", required=True, type=_positive_int, metavar="N",
+                    help="number of cases (0 … N−1)")
+    mc.add_argument("--workers", type=_positive_int, metavar="K",
+                    help="local worker processes (default: every core)")
+    mc.add_argument("--scheduler", metavar="ADDRESS",
+                    help="run on this dask.distributed scheduler (e.g. tcp://host:8786)")
+    mc.add_argument("--out", required=True, type=Path,
+                    help="set directory; rerunning the same command resumes it")
+    mc.add_argument("--keep-trajectories", type=_case_list, default=(), metavar="K,K,…",
+                    help="also store these cases' whole trajectories")
+    mc.add_argument("--retry-failed", action="store_true", help="rerun cases that failed")
+    mc.add_argument("--force", action="store_true",
+                    help="replace an --out that holds something else")
     est = sub.add_parser("estimate", help="the filter and smoother alone on a telemetry file")
     est.add_argument("telemetry", type=Path, metavar="TELEMETRY.csv")
     est.add_argument("--scenario", required=True, help="scenario (e.g. the run's scenario.yaml)")
@@ -106,11 +148,16 @@ def _cmd_run(args) -> int:
     from .runs import run_to_directory
 
     scenario = load_with_overrides(args)
-    out = args.out or Path("runs") / f"{scenario.name}-{time.strftime('%Y%m%dT%H%M%S')}"
+    case = args.montecarlo_case
+    if case is not None and not scenario.montecarlo.dispersions:
+        raise InputError(f"--montecarlo-case: scenario {scenario.name} declares no "
+                         "montecarlo.dispersions")
+    suffix = "" if case is None else f"-case{case}"
+    out = args.out or Path("runs") / f"{scenario.name}{suffix}-{time.strftime('%Y%m%dT%H%M%S')}"
     check_out_dir(out, args.force)
     start = time.perf_counter()
     with staged_run_dir(out, force=args.force) as stage:
-        summary = run_to_directory(scenario, stage)
+        summary = run_to_directory(scenario, stage, montecarlo_case=case)
     ends = ", ".join(f"{e:+.4f}" for e in summary["yaw_error_at_gap_end_deg"]) or "none"
     sig = ", ".join(f"{e:.4f}" for e in summary["yaw_sigma_at_gap_end_deg"]) or "none"
     print(f"{scenario.name}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; at Sun-gap "
@@ -171,16 +218,17 @@ def _cmd_covariance(args) -> int:
     return 0
 
 
-def _reproduce_command(args) -> str:
-    """The command line that reproduces a report, as the user would type it."""
-    parts = ["dynprop", args.command, args.scenario]
+def _reproduce_command(args, command: str | None = None, out: bool = True) -> str:
+    """The command line that reproduces a report, as the user would type it into a
+    shell (quoted where a value has spaces)."""
+    parts = ["dynprop", command or args.command, args.scenario]
     if args.seed is not None:
         parts += ["--seed", args.seed]
     if args.duration_s is not None:
         parts += ["--duration-s", args.duration_s]
     for s in args.set:
         parts += ["--set", s]
-    return " ".join(parts + ["--out", "DIR"])
+    return shlex.join(parts + (["--out", "DIR"] if out else []))
 
 
 def _cmd_linearization(args) -> int:
@@ -199,10 +247,41 @@ def _cmd_linearization(args) -> int:
     return 0
 
 
+def _cmd_montecarlo(args) -> int:
+    from .montecarlo.runset import one_line, pending_cases, run_set
+    from .montecarlo.store import SetDirectory
+
+    scenario = load_with_overrides(args)
+    if not scenario.montecarlo.dispersions:
+        print(f"dynprop: note: scenario {scenario.name} declares no montecarlo.dispersions; "
+              "cases differ only in their noise draws", file=sys.stderr)
+    command = _reproduce_command(args, "run", out=False) + " --montecarlo-case K"
+    start = time.perf_counter()
+    try:
+        result = run_set(scenario, args.runs, args.out, args.workers, args.scheduler,
+                         args.keep_trajectories, args.force, args.retry_failed, command)
+    except KeyboardInterrupt:
+        store = SetDirectory(args.out)
+        left = len(pending_cases(store, args.runs, set(), False)) \
+            if store.cases_dir.is_dir() else args.runs
+        print(f"dynprop: interrupted; {args.runs - left} of {args.runs} cases are stored in "
+              f"{args.out}; rerun the same command to finish the other {left}",
+              file=sys.stderr)
+        return 130
+    s = result.summary
+    verb = "resumed" if result.resumed else "ran"
+    print(f"{scenario.name}: {verb} {result.ran} of {args.runs} cases in "
+          f"{time.perf_counter() - start:.1f} s; {one_line(s)}")
+    for f in s["failed"]:
+        print(f"  case {f['case']} failed: {f['error']}", file=sys.stderr)
+    print(f"wrote {args.out}/montecarlo.json and {args.out}/plots/")
+    return 1 if s["runs_failed"] else 0
+
+
 COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd_plot,
             "run": _cmd_run, "estimate": _cmd_estimate,
             "observability": _cmd_observability, "covariance": _cmd_covariance,
-            "linearization": _cmd_linearization}
+            "linearization": _cmd_linearization, "montecarlo": _cmd_montecarlo}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,6 +15,7 @@ import yaml
 from pydantic import ValidationError
 
 from . import __version__
+from .montecarlo.schema import DISTRIBUTION_TAGS
 from .schema import Scenario
 
 
@@ -125,12 +126,22 @@ def apply_override(raw: dict, assignment: str) -> None:
     node[keys[-1]] = _parse_yaml(text, f"--set {path}")
 
 
+def _union_label(part) -> bool:
+    return isinstance(part, str) and (part in DISTRIBUTION_TAGS or part == "float"
+                                      or part.startswith("tuple["))
+
+
 def format_error(exc: ValidationError) -> str:
     """One line: the first problem's key path and message (+ how many more)."""
     errors = exc.errors()
     first = errors[0]
-    loc = ".".join(str(p) for p in first["loc"]) or "scenario"
+    # Union labels in a dispersion's loc ("...normal.sigma.float") are not keys the
+    # user wrote.
+    loc = ".".join(str(p) for p in first["loc"] if not _union_label(p))
     msg = first["msg"].removeprefix("Value error, ")
+    if not loc:
+        # Whole-scenario checks (the Monte Carlo keys) name their key path themselves.
+        loc, _, msg = msg.partition(": ") if ": " in msg else ("scenario", "", msg)
     if first["type"] == "extra_forbidden":
         msg = "unknown key"
     elif first["type"] == "missing":

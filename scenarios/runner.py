@@ -44,12 +44,15 @@ def simulate(scenario: Scenario, run: int = 0, model=None) -> Simulation:
 
 
 def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = None,
-                     truth_writer=None) -> dict[str, np.ndarray]:
+                     truth_writer=None, scenario: Scenario | None = None
+                     ) -> dict[str, np.ndarray]:
     """scenario.yaml (resolved), truth.csv and telemetry.csv into ``stage``; returns
     the telemetry columns exactly as written (17 digits: a re-read gives the same
     doubles, so `dynprop estimate` on the file reproduces a run's filter).  With
-    ``truth_writer`` (a callable taking path and columns) truth.csv is handed off."""
-    (stage / "scenario.yaml").write_text(resolved_yaml(sim.scenario))
+    ``truth_writer`` (a callable taking path and columns) truth.csv is handed off.
+    ``scenario`` is what scenario.yaml records, if not the one simulated (a Monte
+    Carlo case records its nominal scenario)."""
+    (stage / "scenario.yaml").write_text(resolved_yaml(scenario or sim.scenario))
     truth = truth_columns(sim.truth, sim.telemetry.sun_visible)
     tel = telemetry_columns(sim.telemetry, sim.head_names)
     if truth_writer is not None:

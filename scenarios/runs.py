@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +30,21 @@ from .runner import simulate, write_simulation
 from .schema import Scenario
 
 
-def run_to_directory(s: Scenario, stage: Path) -> dict:
-    """Everything of one `dynprop run` into ``stage``; returns the summary."""
-    sim = simulate(s)
+def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = None) -> dict:
+    """Everything of one `dynprop run` into ``stage``; returns the summary.
+
+    With ``montecarlo_case`` K the spacecraft that flies is case K of the scenario's
+    dispersions, with case K's noise streams; the filter stays nominal.  Then
+    scenario.yaml is the nominal scenario (rerun it with the same K), and
+    case_scenario.yaml and montecarlo_case.json/.npz hold the case: the latter
+    exactly what `dynprop montecarlo` stores for case K."""
+    case = montecarlo_case
+    flying, dispersed = s, None
+    if case is not None:
+        from .montecarlo.dispersions import draw_case
+        dispersed, flying = draw_case(s, case)
+    run = 0 if case is None else case
+    sim = simulate(flying, run)
     writers = []
 
     def in_background(path, columns):
@@ -40,8 +53,13 @@ def run_to_directory(s: Scenario, stage: Path) -> dict:
     try:
         # truth.csv is written by a second process while the filters run; the filter
         # sees the telemetry exactly as written, so `dynprop estimate` reproduces it.
-        written = write_simulation(stage, sim, truth_writer=in_background)
-        summary = _estimate_and_report(s, sim, written, stage, in_background)
+        written = write_simulation(stage, sim, truth_writer=in_background, scenario=s)
+        runs = run_scenario(s, sim, written, run=run, truth_scenario=flying)
+        summary = _estimate_and_report(s, runs, written, stage, in_background)
+        if case is not None:
+            summary.update(montecarlo_case=case, epoch_utc=flying.epoch_utc,
+                           dispersed=dispersed)
+            _write_case(s, runs, written, stage, case, dispersed, flying)
         for w in writers:
             w.wait()
     except BaseException:
@@ -52,8 +70,20 @@ def run_to_directory(s: Scenario, stage: Path) -> dict:
     return summary
 
 
-def _estimate_and_report(s: Scenario, sim, written, stage: Path, in_background) -> dict:
-    runs = run_scenario(s, sim, written)
+def _write_case(s: Scenario, runs, written, stage: Path, case: int, dispersed, flying) -> None:
+    from .loader import resolved_yaml
+    from .montecarlo.case import reduce_case
+    from .montecarlo.store import save_case
+    (stage / "case_scenario.yaml").write_text(resolved_yaml(flying))
+    if not s.montecarlo.linear_twin:
+        runs = replace(runs, linear=None, twin_model=None)
+    record, arrays = reduce_case(s, runs, np.isfinite(written["yaw_deg"]), case, dispersed,
+                                 flying.epoch_utc)
+    save_case(stage / "montecarlo_case", {"record": record, "arrays": arrays})
+
+
+def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background) -> dict:
+    sim = runs.sim
     t = sim.truth.t_s
     present = np.isfinite(written["yaw_deg"])
     in_background(stage / "estimate.csv",

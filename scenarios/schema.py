@@ -19,6 +19,8 @@ from sim import ephemeris, sensors, spacecraft
 from sim.frames import GeoOrbit
 from sim.telemetry import MIN_SUN_SEPARATION_DEG
 
+from .montecarlo.schema import MonteCarlo, check_dispersion
+
 # The simulator's dataclasses hold the GOES-Next defaults; the schema reads them
 # from there so that the two can never disagree.
 _SOLAR = sim_env.SolarTorque()
@@ -175,6 +177,10 @@ class EarthSensor(_Section):
     noise_deg: float = Field(_EARTH.noise_deg, ge=0, description="roll and pitch noise, 1σ (deg)")
     quantum_deg: float = Field(_EARTH.quantum_deg, gt=0,
                                description="roll and pitch quantisation (deg)")
+    roll_bias_deg: float = Field(_EARTH.roll_bias_deg, description="constant roll error: "
+                                 "measured = quantised(true + bias + noise) (deg)")
+    pitch_bias_deg: float = Field(_EARTH.pitch_bias_deg,
+                                  description="constant pitch error, likewise (deg)")
 
 
 class SunHead(_Section):
@@ -188,13 +194,20 @@ class SunHead(_Section):
     quantum_deg: float = Field(gt=0, description="angle quantisation (deg)")
     noise_deg: float = Field(ge=0, description="angle noise 1σ; CASS: on the boresight, "
                              "growing as 1/cos(off-boresight) (deg)")
+    in_plane_bias_deg: float = Field(0.0, description="constant error of the in-plane angle "
+                                     "α: measured = quantised(true + bias + noise); the "
+                                     "ground yaw does not know it (deg)")
+    out_of_plane_bias_deg: float = Field(0.0, description="constant error of the "
+                                         "out-of-plane angle β, likewise (deg)")
 
 
 # GOES-Next heads, from sim.sensors: the DSS on dusk, two CASS.
 HEAD_DEFAULTS = {
     h.name: dict(kind=h.kind, boresight_hour_angle_deg=h.boresight_hour_angle_deg,
                  fov_in_plane_deg=h.fov_in_plane_deg, fov_out_of_plane_deg=h.fov_out_of_plane_deg,
-                 quantum_deg=h.quantum_deg, noise_deg=h.noise_deg)
+                 quantum_deg=h.quantum_deg, noise_deg=h.noise_deg,
+                 in_plane_bias_deg=h.in_plane_bias_deg,
+                 out_of_plane_bias_deg=h.out_of_plane_bias_deg)
     for h in sensors.goes_next_sun_sensors()
 }
 
@@ -223,6 +236,8 @@ class SunSensors(_Section):
 class Tachometer(_Section):
     quantum_rpm: float = Field(_TACH.quantum_rpm, gt=0, description="quantisation (rpm)")
     noise_3sigma_rpm: float = Field(_TACH.noise_3sigma_rpm, ge=0, description="noise, 3σ (rpm)")
+    bias_rpm: float = Field(_TACH.bias_rpm, description="constant speed error, the same on "
+                            "every wheel: measured = quantised(true + bias + noise) (rpm)")
 
 
 class Sensors(_Section):
@@ -301,6 +316,7 @@ class Scenario(_Section):
     control: Control = Field(default_factory=Control)
     sensors: Sensors = Field(default_factory=Sensors)
     estimator: Estimator = Field(default_factory=Estimator)
+    montecarlo: MonteCarlo = Field(default_factory=MonteCarlo)
 
     @field_validator("dynprop_version", mode="before")
     @classmethod
@@ -314,3 +330,21 @@ class Scenario(_Section):
         if not 1950 <= epoch.year < 2050:
             raise ValueError("must be in 1950–2049, where the solar ephemeris holds 0.01°")
         return v
+
+    @model_validator(mode="after")
+    def _dispersed_keys_exist(self):
+        for key, d in self.montecarlo.dispersions.items():
+            check_dispersion(key, leaf_value(self, key), d)
+        return self
+
+
+def leaf_value(scenario: BaseModel, key: str):
+    """The value at a dotted key path; ValueError naming it if it is not a leaf key."""
+    node = scenario
+    for part in key.split("."):
+        if not isinstance(node, BaseModel) or part not in type(node).model_fields:
+            raise ValueError(f"montecarlo.dispersions.{key}: no such scenario key")
+        node = getattr(node, part)
+    if isinstance(node, BaseModel):
+        raise ValueError(f"montecarlo.dispersions.{key}: is a section, not a value")
+    return node

@@ -482,3 +482,70 @@ def test_schema_defaults_are_the_simulator_defaults():
     assert build.build_sensors(s) == SensorSuite()
     assert build.orbit(s) == GeoOrbit()
     assert build.build_spacecraft(s) == goes_next()
+
+
+# --------------------------------------------------------------------------- sensor biases
+
+BIAS_KEYS = ("earth.roll_bias_deg", "earth.pitch_bias_deg", "tachometer.bias_rpm",
+             *(f"sun.{h}.{k}" for h in ("dss", "cass1", "cass2")
+               for k in ("in_plane_bias_deg", "out_of_plane_bias_deg")))
+
+
+def _sensor_key(s, key: str):
+    node = s.sensors
+    for part in key.split("."):
+        node = getattr(node, part)
+    return node
+
+
+def test_sensor_biases_default_to_zero_and_reach_the_built_sensors(tmp_path):
+    bare = validate({"name": "x"})
+    for key in BIAS_KEYS:
+        assert _sensor_key(bare, key) == 0.0, key
+    path = write(tmp_path, "name: x\nsensors:\n"
+                 "  earth: {roll_bias_deg: 0.02, pitch_bias_deg: -0.03}\n"
+                 "  tachometer: {bias_rpm: 0.05}\n"
+                 "  sun:\n"
+                 "    dss: {in_plane_bias_deg: 0.125, out_of_plane_bias_deg: -0.25}\n"
+                 "    cass2: {out_of_plane_bias_deg: 1}\n")
+    s = load_scenario(path)
+    # Setting a bias keeps the head's other values (and the other heads' biases at 0).
+    assert s.sensors.sun.dss.kind == "dss" and s.sensors.sun.dss.quantum_deg == 0.125
+    assert s.sensors.sun.cass2.in_plane_bias_deg == 0.0
+    assert s.sensors.sun.cass2.boresight_hour_angle_deg == 15.0
+    suite = build.build_sensors(s)
+    assert (suite.earth.roll_bias_deg, suite.earth.pitch_bias_deg) == (0.02, -0.03)
+    assert suite.tachometer.bias_rpm == 0.05
+    heads = {h.name: h for h in suite.sun_heads}
+    assert (heads["dss"].in_plane_bias_deg, heads["dss"].out_of_plane_bias_deg) == (0.125, -0.25)
+    assert (heads["cass2"].in_plane_bias_deg, heads["cass2"].out_of_plane_bias_deg) == (0.0, 1.0)
+    assert (heads["cass1"].in_plane_bias_deg, heads["cass1"].out_of_plane_bias_deg) == (0.0, 0.0)
+    # And by --set, and as Monte Carlo dispersions (offsets from the nominal 0).
+    s = load_scenario("goes_next_equinox", ["sensors.sun.cass1.in_plane_bias_deg=-0.5",
+                                            "sensors.tachometer.bias_rpm=1e-2"])
+    assert s.sensors.sun.cass1.in_plane_bias_deg == -0.5 and s.sensors.tachometer.bias_rpm == 0.01
+    validate({"name": "x", "montecarlo": {"dispersions": {
+        f"sensors.{key}": {"distribution": "normal", "sigma": 0.01} for key in BIAS_KEYS}}})
+
+
+@pytest.mark.parametrize("key", BIAS_KEYS)
+@pytest.mark.parametrize("bad", [math.nan, math.inf, "0.1", True],
+                         ids=["nan", "inf", "str", "bool"])
+def test_sensor_biases_reject_non_numbers_naming_the_key(key, bad):
+    raw: dict = {"name": "x"}
+    apply_override(raw, f"sensors.{key}=0")
+    node = raw["sensors"]
+    *parents, leaf = key.split(".")
+    for part in parents:
+        node = node[part]
+    node[leaf] = bad
+    with pytest.raises(ScenarioError) as exc_info:
+        validate(raw)
+    assert_error(exc_info, f"sensors.{key}:")
+
+
+def test_yaml_nan_bias_is_rejected(tmp_path):
+    path = write(tmp_path, "name: x\nsensors:\n  sun:\n    dss:\n      in_plane_bias_deg: .nan\n")
+    with pytest.raises(ScenarioError) as exc_info:
+        load_scenario(path)
+    assert_error(exc_info, "sensors.sun.dss.in_plane_bias_deg:")

@@ -1,0 +1,150 @@
+"""One Monte Carlo case, run and reduced where it runs (a local process or a dask
+worker), so that only a few hundred kB per case travel back.
+
+The reduction keeps, on a common time grid (``montecarlo.grid_s``): the errors of
+the filter on the nonlinear truth and on the linear twin, the filter's σ, and both
+NEES; plus the per-case figures (errors and σ at every Sun-gap end, RMS, mean
+NEES).  ``dynprop run --montecarlo-case K`` computes the same record from its full
+run with the same function, so the two can be compared bit for bit.
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+
+import numpy as np
+
+from estimator.consistency import nees
+from estimator.kalman import unpack
+from estimator.model import H_WHEEL, N_STATES, R, Y
+
+from ..columns import telemetry_columns
+from ..outputs import display_factors, sun_gaps
+from ..pipeline import run_scenario
+from ..runner import simulate
+from ..schema import Scenario
+from .dispersions import draw_case
+
+RAD2DEG = 180.0 / np.pi
+# Where P's diagonal sits in its packed upper triangle (estimator.kalman.pack).
+_DIAG = np.array([k for k, (i, j) in enumerate(zip(*np.triu_indices(N_STATES), strict=True))
+                  if i == j])
+
+
+def grid_stride(s: Scenario) -> int:
+    """Samples between grid points: ``montecarlo.grid_s`` rounded to whole samples."""
+    return max(1, int(round(s.montecarlo.grid_s / s.sample_interval_s)))
+
+
+def case_rows(s: Scenario, n: int, yaw_present: np.ndarray):
+    """Grid indices, Sun gaps (start, end) and the sorted union of the grid and the
+    gap ends: the only samples of the filter history a case keeps."""
+    grid = np.arange(0, n, grid_stride(s))
+    gaps = sun_gaps(yaw_present, s.sample_interval_s, s.estimator.sun_gap_min_h)
+    ends = [b for _, b in gaps if b < n]
+    return grid, gaps, np.union1d(grid, np.asarray(ends, dtype=np.int64))
+
+
+def _rms(a) -> float:
+    return float(np.sqrt(np.mean(np.square(a))))
+
+
+def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
+                dispersed: dict, epoch_utc: str) -> tuple[dict, dict[str, np.ndarray]]:
+    """The case record (JSON) and its grid arrays (float32, display units: deg,
+    deg/s, N m s, N m).  ``runs`` holds either the full histories or exactly the
+    rows of ``case_rows``."""
+    n, dt = len(runs.truth_model), s.sample_interval_s
+    grid, gaps, rows = case_rows(s, n, yaw_present)
+    if runs.rows is None:
+        def at(a):
+            return a[rows]
+    else:
+        if not np.array_equal(runs.rows, rows):
+            raise ValueError("the filter history was kept at other rows than case_rows")
+
+        def at(a):
+            return a
+    on_grid = np.searchsorted(rows, grid)
+    f = display_factors(runs.params.omega_n_radps)
+    truth = runs.truth_model[rows]
+    x, P = at(runs.real.x), at(runs.real.P_packed)
+    err = x - truth
+    sigma = np.sqrt(P[:, _DIAG])
+    nees_real = nees(x, unpack(P), truth)
+    converged = grid * dt >= s.montecarlo.converged_after_h * 3600
+    ends = [b for _, b in gaps if b < n]
+    at_end = np.searchsorted(rows, ends)
+    record = {
+        "case": case, "status": "ok", "seed": s.seed, "spawn_key": [case],
+        "dispersed": dispersed, "epoch_utc": epoch_utc, "backend": runs.real.backend,
+        "sun_gaps_h": [[float(a * dt / 3600), float(b * dt / 3600)] for a, b in gaps],
+        "gap_end_h": [float(b * dt / 3600) for b in ends],
+        "yaw_error_at_gap_end_deg": [float(err[i, Y] * RAD2DEG) for i in at_end],
+        "yaw_sigma_at_gap_end_deg": [float(sigma[i, Y] * RAD2DEG) for i in at_end],
+        "roll_error_rms_deg": _rms(err[on_grid, R]) * RAD2DEG,
+        "yaw_error_rms_deg": _rms(err[on_grid, Y]) * RAD2DEG,
+        "h_error_rms_Nms": _rms(err[on_grid, H_WHEEL]),
+        "yaw_error_max_abs_deg": float(np.max(np.abs(err[on_grid, Y]))) * RAD2DEG,
+        "nees_mean": float(np.mean(nees_real[on_grid][converged])) if converged.any()
+        else None,
+    }
+    arrays = {"t_s": (grid * dt).astype(np.float64),
+              "err": (err[on_grid] * f).astype(np.float32),
+              "sigma": (sigma[on_grid] * np.abs(f)).astype(np.float32),
+              "nees": nees_real[on_grid].astype(np.float32)}
+    if runs.linear is not None:
+        twin = runs.twin_model[rows]
+        xl, Pl = at(runs.linear.x), at(runs.linear.P_packed)
+        err_l = xl - twin
+        nees_lin = nees(xl, unpack(Pl), twin)
+        record["yaw_error_linear_at_gap_end_deg"] = [float(err_l[i, Y] * RAD2DEG)
+                                                     for i in at_end]
+        record["yaw_error_rms_linear_deg"] = _rms(err_l[on_grid, Y]) * RAD2DEG
+        record["nees_mean_linear"] = (float(np.mean(nees_lin[on_grid][converged]))
+                                      if converged.any() else None)
+        arrays["err_linear"] = (err_l[on_grid] * f).astype(np.float32)
+        arrays["nees_linear"] = nees_lin[on_grid].astype(np.float32)
+    return record, arrays
+
+
+def full_arrays(runs) -> dict[str, np.ndarray]:
+    """A kept case's whole trajectories (float32, display units)."""
+    f = display_factors(runs.params.omega_n_radps)
+    out = {"t_s": runs.sim.truth.t_s, "err": (runs.real.x - runs.truth_model) * f,
+           "sigma": runs.real.sigma * np.abs(f), "truth": runs.truth_model * f}
+    if runs.linear is not None:
+        out["err_linear"] = (runs.linear.x - runs.twin_model) * f
+    return {k: (v if k == "t_s" else np.asarray(v, dtype=np.float32)) for k, v in out.items()}
+
+
+def run_case(s: Scenario, case: int, keep_full: bool = False) -> dict:
+    """Draw, simulate, filter and reduce case ``case`` of the nominal scenario ``s``.
+
+    Never raises for a failing case: the outcome then has status "failed" and the
+    error, so one bad case cannot stop a set."""
+    start = time.perf_counter()
+    try:
+        dispersed, flying = draw_case(s, case)
+        sim = simulate(flying, run=case)
+        # The filter sees the telemetry exactly as `dynprop run` writes it.
+        cols = telemetry_columns(sim.telemetry, sim.head_names)
+        present = np.isfinite(cols["yaw_deg"])
+        _, _, rows = case_rows(s, len(present), present)
+        runs = run_scenario(s, sim, cols, run=case, smooth=False, truth_scenario=flying,
+                            rows=None if keep_full else rows, twin=s.montecarlo.linear_twin)
+        record, arrays = reduce_case(s, runs, present, case, dispersed, flying.epoch_utc)
+        full = full_arrays(runs) if keep_full else None
+        return {"record": record, "arrays": arrays, "full": full,
+                "wall_s": time.perf_counter() - start}
+    except Exception as exc:  # recorded, not raised: see the docstring
+        return failed(case, exc, time.perf_counter() - start)
+
+
+def failed(case: int, exc: BaseException, wall_s: float = 0.0) -> dict:
+    message = str(exc).splitlines()[0] if str(exc) else ""
+    return {"record": {"case": case, "status": "failed",
+                       "error": f"{type(exc).__name__}: {message}",
+                       "traceback": traceback.format_exception(exc)[-3:]},
+            "arrays": None, "full": None, "wall_s": wall_s}

@@ -1,0 +1,114 @@
+"""Run cases locally (one process per core) or on a dask.distributed cluster.
+
+Both hand every finished case to ``on_done`` as soon as it arrives, so the caller
+stores it before the next one: a set killed at any moment loses only the cases in
+flight.  Scheduling is the libraries' (``concurrent.futures`` locally, dask's
+scheduler on a cluster); here there is only bookkeeping.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import multiprocessing
+import os
+import sys
+from collections.abc import Callable, Iterable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+
+from ..loader import resolved_yaml
+from ..schema import Scenario
+from .case import failed, run_case
+
+WORKER_MODULE = "scenarios.montecarlo.case"
+
+
+def default_workers() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def _progress(total: int, initial: int, desc: str):
+    """A bar with the rate and ETA on a terminal; silent otherwise (logs, tests)."""
+    from tqdm import tqdm
+    return tqdm(total=total, initial=initial, desc=desc, unit="case", file=sys.stderr,
+                disable=not sys.stderr.isatty(), smoothing=0.1, dynamic_ncols=True)
+
+
+def _context():
+    # forkserver: workers fork from a clean server that has already imported the
+    # simulator, so each starts in milliseconds and inherits no threads or locks
+    # from this process (tqdm's monitor, for one).
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload([WORKER_MODULE])
+        return ctx
+    return multiprocessing.get_context("spawn")  # pragma: no cover - not POSIX
+
+
+def run_local(s: Scenario, cases: list[int], keep: Iterable[int], workers: int,
+              on_done: Callable[[dict], None], done_before: int = 0, total: int = 0) -> None:
+    """Up to ``workers`` cases at a time in worker processes.  A worker that dies
+    (killed, out of memory) fails only the cases it may have held; the pool is
+    restarted for the rest."""
+    keep = set(keep)
+    todo = list(cases)
+    bar = _progress(total or len(todo), done_before, "montecarlo")
+    try:
+        while todo:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=_context()) as pool:
+                running = {}
+                broken = False
+                while (todo or running) and not broken:
+                    while todo and len(running) < 2 * workers:
+                        k = todo.pop(0)
+                        running[pool.submit(run_case, s, k, k in keep)] = k
+                    finished, _ = wait(running, return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        k = running.pop(fut)
+                        try:
+                            outcome = fut.result()
+                        except BrokenProcessPool as exc:
+                            broken = True
+                            outcome = failed(k, RuntimeError(f"worker process died ({exc})"))
+                        on_done(outcome)
+                        bar.update()
+                if broken:
+                    # Every case still held by the dead pool is failed, not lost.
+                    for k in running.values():
+                        on_done(failed(k, RuntimeError("worker process died")))
+                        bar.update()
+    finally:
+        bar.close()
+
+
+def run_dask(s: Scenario, cases: list[int], keep: Iterable[int], address: str,
+             on_done: Callable[[dict], None], done_before: int = 0, total: int = 0) -> None:
+    """The same cases on an existing dask.distributed cluster at ``address``."""
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise RuntimeError("--scheduler needs dask.distributed: pip install "
+                           "'dynprop[dask]'") from None
+    keep = set(keep)
+    # Keys name this very set, so two sets on one cluster never share results.
+    digest = hashlib.sha256(resolved_yaml(s).encode()).hexdigest()[:12]
+    bar = _progress(total or len(cases), done_before, "montecarlo (dask)")
+    try:
+        with Client(address, timeout="20s") as client:
+            futures = {client.submit(run_case, s, k, k in keep, pure=False,
+                                     key=f"dynprop-{digest}-case-{k}"): k
+                       for k in cases}
+            for fut in as_completed(futures):
+                k = futures[fut]
+                try:
+                    outcome = fut.result()
+                except Exception as exc:  # a worker lost for good (KilledWorker, ...)
+                    outcome = failed(k, exc)
+                on_done(outcome)
+                fut.release()
+                bar.update()
+    finally:
+        bar.close()

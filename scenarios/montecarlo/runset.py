@@ -1,0 +1,114 @@
+"""`dynprop montecarlo`: run (or resume) a set, then write the ensemble results."""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..schema import Scenario
+from .execute import default_workers, run_dask, run_local
+from .stats import ensemble
+from .store import SetDirectory, atomic_write
+
+FIGURES = ("mc_errors.png", "mc_nees.png", "mc_gap_yaw.png")
+
+
+@dataclass(frozen=True)
+class SetResult:
+    summary: dict
+    ran: int          # cases run by this invocation
+    resumed: bool     # the directory already held part of this set
+
+
+def pending_cases(store: SetDirectory, n_runs: int, keep, retry_failed: bool) -> list[int]:
+    records = store.records()
+    return [k for k in range(n_runs)
+            if k not in records
+            or (retry_failed and records[k]["status"] != "ok")
+            or (k in keep and records[k]["status"] == "ok" and not store.has_full(k))]
+
+
+def run_set(s: Scenario, n_runs: int, out: Path, workers: int | None = None,
+            scheduler: str | None = None, keep=(), force: bool = False,
+            retry_failed: bool = False, command: str = "") -> SetResult:
+    """Cases 0 … n_runs−1 of ``s``'s dispersions, skipping those already stored in
+    ``out``; then montecarlo.json, montecarlo.npz and the figures."""
+    store = SetDirectory(out)
+    resumed = store.open(s, force)
+    store.clean_temporaries()
+    keep = {k for k in keep if k < n_runs}
+    todo = pending_cases(store, n_runs, keep, retry_failed)
+    if todo:
+        kwargs = dict(on_done=store.save, done_before=n_runs - len(todo), total=n_runs)
+        if scheduler:
+            run_dask(s, todo, keep, scheduler, **kwargs)
+        else:
+            run_local(s, todo, keep, workers or default_workers(), **kwargs)
+    summary = write_results(s, store, n_runs, command)
+    return SetResult(summary, len(todo), resumed)
+
+
+def write_results(s: Scenario, store: SetDirectory, n_runs: int, command: str) -> dict:
+    summary, fig = ensemble(s, store.records(), store.arrays, n_runs, command)
+    out = store.out
+    buf = io.BytesIO()
+    np.savez(buf, **fig)
+    atomic_write(out / "montecarlo.npz", buf.getvalue())
+    if fig:
+        draw_figures(out / "plots", s, summary, fig, command)
+    atomic_write(out / "montecarlo.json",
+                 (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode())
+    return summary
+
+
+def caption(s: Scenario, summary: dict, command: str) -> str:
+    failed = f", {summary['runs_failed']} failed" if summary["runs_failed"] else ""
+    return (f"scenario {s.name}, seed {s.seed}, {summary['runs_ok']} runs{failed}; "
+            f"{command}")
+
+
+def draw_figures(plots: Path, s: Scenario, summary: dict, fig: dict, command: str) -> None:
+    import matplotlib.pyplot as plt
+
+    from plots.montecarlo import plot_ensemble_errors, plot_ensemble_nees, plot_gap_end_yaw
+    plots.mkdir(exist_ok=True)
+    text = caption(s, summary, command)
+    conv = s.montecarlo.converged_after_h
+    figures = (
+        plot_ensemble_errors(fig, summary["analytic_sigma_yaw_deg"], summary["runs_ok"],
+                             conv, text),
+        plot_ensemble_nees(fig, summary, conv, text),
+        plot_gap_end_yaw(fig, summary, text),
+    )
+    for name, f in zip(FIGURES, figures, strict=True):
+        buf = io.BytesIO()
+        f.savefig(buf, dpi=110, format="png")
+        plt.close(f)
+        atomic_write(plots / name, buf.getvalue())
+
+
+def one_line(summary: dict) -> str:
+    """The headline of a set for the terminal."""
+    if not summary["runs_ok"]:
+        return f"no successful runs ({summary['runs_failed']} failed)"
+    n = summary["nees"]
+    lo, hi = n["bounds_95"]
+    frac = n["fraction_after_convergence"]
+    parts = [f"{summary['runs_ok']} runs ({summary['runs_failed']} failed)"]
+    if frac is None:
+        parts.append(f"no NEES test: the run ends before {summary['converged_after_h']:g} h")
+    else:
+        parts.append(f"averaged NEES {n['mean_after_convergence']:.2f} after "
+                     f"{summary['converged_after_h']:g} h, inside [{lo:.2f}, {hi:.2f}] "
+                     f"{100 * frac['inside']:.0f}% of the time (below "
+                     f"{100 * frac['below']:.0f}%)")
+    for g in summary["gap_end_yaw"]:
+        q = g["abs_quantile_deg"]
+        parts.append(f"yaw at gap {g['gap']} end: ensemble 1σ/3σ {q['1sigma']:.4f}/"
+                     f"{q['3sigma']:.4f} deg vs filter σ {g['predicted_sigma_deg']:.4f}")
+    parts.append(f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg")
+    return "; ".join(parts)

@@ -1,0 +1,150 @@
+"""Ensemble statistics of a Monte Carlo set: the Monte Carlo version of the
+paper's accuracy claim (ensemble RMS against the filter's σ and Eq. 55), the
+averaged-NEES test, and the yaw error at the end of each Sun gap.
+
+Averaged NEES: with N independent runs, N·ε̄(t) ~ χ²(9N) when the filter is
+consistent, so ε̄(t) must lie in the χ²(9N)/N bounds 95% of the time (Bar-Shalom,
+Li & Kirubarajan, *Estimation with Applications to Tracking and Navigation*,
+Section 5.4.2).  Per state, N·mean((e/σ)²) ~ χ²(N) likewise; that decomposition
+shows which states make the NEES what it is.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from estimator.consistency import chi2_bounds
+from estimator.covariance import approx_yaw_variance
+from estimator.model import H_WHEEL, N_STATES, R, Y
+
+from .. import __version__
+from ..build import estimator_model
+from ..outputs import STATE_COLUMNS
+from ..schema import Scenario
+
+RAD2DEG = 180.0 / np.pi
+# |e| quantiles that a Gaussian puts at 1σ, 2σ and 3σ.
+SIGMA_LEVELS = {"1sigma": 0.682689492, "2sigma": 0.954499736, "3sigma": 0.997300204}
+
+
+def eq55_sigma_yaw_deg(s: Scenario) -> float:
+    params, _ = estimator_model(s)
+    q = 0.5 * (s.estimator.process_noise.q_x + s.estimator.process_noise.q_z)
+    return float(np.sqrt(approx_yaw_variance(q, params.H_Nms, params.omega0_radps))) * RAD2DEG
+
+
+def _fraction(v, lo, hi) -> dict | None:
+    v = np.asarray(v)
+    if not v.size:
+        return None
+    return {"inside": float(np.mean((v >= lo) & (v <= hi))), "below": float(np.mean(v < lo)),
+            "above": float(np.mean(v > hi))}
+
+
+def _mean(v, axis=None):
+    """Mean, or None where there is nothing to average (a run shorter than the
+    convergence time)."""
+    v = np.asarray(v)
+    if not v.size:
+        return None
+    m = v.mean(axis=axis)
+    return float(m) if np.ndim(m) == 0 else [float(x) for x in m]
+
+
+def _gap_stats(errors: np.ndarray, sigmas: np.ndarray | None) -> dict:
+    a = np.abs(errors)
+    out = {"n": int(errors.size), "mean_deg": float(errors.mean()),
+           "std_deg": float(errors.std(ddof=1)) if errors.size > 1 else None,
+           "rms_deg": float(np.sqrt(np.mean(errors**2)))}
+    out["abs_quantile_deg"] = {name: float(np.quantile(a, p)) for name, p in SIGMA_LEVELS.items()}
+    if sigmas is not None:
+        out["predicted_sigma_deg"] = float(np.sqrt(np.mean(sigmas**2)))
+        out["fraction_within"] = {f"{k}sigma": float(np.mean(a <= k * sigmas)) for k in (1, 2, 3)}
+    return out
+
+
+def _root(v):
+    return None if v is None else float(np.sqrt(v))
+
+
+def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
+             command: str) -> tuple[dict, dict[str, np.ndarray]]:
+    """montecarlo.json and the arrays the figures are drawn from (montecarlo.npz)."""
+    wanted = {k: r for k, r in records.items() if k < n_runs}
+    ok = sorted(k for k, r in wanted.items() if r["status"] == "ok")
+    fails = [{"case": k, "error": wanted[k]["error"]} for k in sorted(wanted)
+             if wanted[k]["status"] != "ok"]
+    summary = {"scenario": s.name, "seed": s.seed, "dynprop_version": __version__,
+               "runs_requested": n_runs, "runs_ok": len(ok), "runs_failed": len(fails),
+               "runs_missing": n_runs - len(wanted), "failed": fails,
+               "dispersions": {k: d.model_dump() for k, d in s.montecarlo.dispersions.items()},
+               "grid_s": None, "converged_after_h": s.montecarlo.converged_after_h,
+               "analytic_sigma_yaw_deg": eq55_sigma_yaw_deg(s),
+               "reproduce_case": command}
+    if not ok:
+        return summary, {}
+    stacks: dict[str, list] = {}
+    for k in ok:
+        for name, a in load_arrays(k).items():
+            stacks.setdefault(name, []).append(a)
+    t_s = stacks["t_s"][0]
+    err = np.stack(stacks["err"]).astype(float)        # (M, G, 9), display units
+    sig = np.stack(stacks["sigma"]).astype(float)
+    nees = np.stack(stacks["nees"]).astype(float)      # (M, G)
+    linear = "err_linear" in stacks and len(stacks["err_linear"]) == len(ok)
+    m = len(ok)
+    summary["grid_s"] = float(t_s[1] - t_s[0]) if len(t_s) > 1 else None
+    conv = t_s >= s.montecarlo.converged_after_h * 3600
+
+    nees_avg = nees.mean(axis=0)
+    bounds = chi2_bounds(N_STATES, m)
+    nsq = np.mean((err / sig) ** 2, axis=0)            # (G, 9)
+    b1 = chi2_bounds(1, m)
+    summary["nees"] = {
+        "dof": N_STATES, "runs": m, "bounds_95": list(bounds),
+        "mean_after_convergence": _mean(nees_avg[conv]),
+        "fraction_after_convergence": _fraction(nees_avg[conv], *bounds),
+        "per_state_bounds_95": list(b1),
+        "per_state_mean_after_convergence": dict(zip(
+            STATE_COLUMNS, _mean(nsq[conv], axis=0) or [None] * N_STATES, strict=True)),
+    }
+    fig = {"t_s": t_s, "rms": np.sqrt(np.mean(err**2, axis=0)),
+           "sigma_rms": np.sqrt(np.mean(sig**2, axis=0)), "nees_avg": nees_avg,
+           "nees_bounds": np.array(bounds), "nsq": nsq, "nsq_bounds": np.array(b1),
+           "mean_err": err.mean(axis=0)}
+    if linear:
+        err_l = np.stack(stacks["err_linear"]).astype(float)
+        nees_l = np.stack(stacks["nees_linear"]).astype(float).mean(axis=0)
+        summary["nees"]["linear"] = {
+            "mean_after_convergence": _mean(nees_l[conv]),
+            "fraction_after_convergence": _fraction(nees_l[conv], *bounds)}
+        fig["rms_linear"] = np.sqrt(np.mean(err_l**2, axis=0))
+        fig["nees_avg_linear"] = nees_l
+    summary["rms_after_convergence"] = {
+        name: {"ensemble_rms": _root(_mean(err[:, conv, k] ** 2)),
+               "filter_sigma_rms": _root(_mean(sig[:, conv, k] ** 2))}
+        for name, k in (("roll_deg", R), ("yaw_deg", Y), ("h_Nms", H_WHEEL))}
+
+    # Yaw at the end of each Sun gap (gap j of every case: same local time, since
+    # epochs move by whole days).
+    gaps = []
+    n_gaps = max(len(wanted[k]["yaw_error_at_gap_end_deg"]) for k in ok)
+    for j in range(n_gaps):
+        have = [k for k in ok if len(wanted[k]["yaw_error_at_gap_end_deg"]) > j]
+        e = np.array([wanted[k]["yaw_error_at_gap_end_deg"][j] for k in have])
+        sg = np.array([wanted[k]["yaw_sigma_at_gap_end_deg"][j] for k in have])
+        g = {"gap": j + 1,
+             "start_h_median": float(np.median([wanted[k]["sun_gaps_h"][j][0] for k in have])),
+             "end_h_median": float(np.median([wanted[k]["gap_end_h"][j] for k in have])),
+             **_gap_stats(e, sg)}
+        fig[f"gap{j + 1}_yaw_error_deg"] = e
+        fig[f"gap{j + 1}_yaw_sigma_deg"] = sg
+        if all("yaw_error_linear_at_gap_end_deg" in wanted[k] for k in have):
+            el = np.array([wanted[k]["yaw_error_linear_at_gap_end_deg"][j] for k in have])
+            g["linear"] = _gap_stats(el, sg)
+            fig[f"gap{j + 1}_yaw_error_linear_deg"] = el
+        gaps.append(g)
+    summary["gap_end_yaw"] = gaps
+    fig["gaps_h"] = np.array([[g["start_h_median"], g["end_h_median"]] for g in gaps]
+                             ).reshape(-1, 2)
+    return summary, fig
