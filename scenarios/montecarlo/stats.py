@@ -102,6 +102,7 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
     b1 = chi2_bounds(1, m)
     summary["nees"] = {
         "dof": N_STATES, "runs": m, "bounds_95": list(bounds),
+        "points_after_convergence": int(conv.sum()),
         "mean_after_convergence": _mean(nees_avg[conv]),
         "fraction_after_convergence": _fraction(nees_avg[conv], *bounds),
         "per_state_bounds_95": list(b1),
@@ -145,6 +146,50 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
             fig[f"gap{j + 1}_yaw_error_linear_deg"] = el
         gaps.append(g)
     summary["gap_end_yaw"] = gaps
+    summary["nees"]["diagnosis"] = diagnose(summary["nees"])
     fig["gaps_h"] = np.array([[g["start_h_median"], g["end_h_median"]] for g in gaps]
                              ).reshape(-1, 2)
     return summary, fig
+
+
+def diagnose(n: dict) -> str:
+    """One sentence on where the averaged NEES sits and which states put it there;
+    with the linear twin, whether the linearization or the filter's own model is
+    the cause (the twin obeys that model exactly)."""
+    frac = n["fraction_after_convergence"]
+    if frac is None:
+        return "the run ends before the convergence time: no NEES test"
+    lo, hi = n["per_state_bounds_95"]
+    states = n["per_state_mean_after_convergence"]
+    low = [f"{k} {v:.2g}" for k, v in states.items() if v < lo]
+    high = [f"{k} {v:.2g}" for k, v in states.items() if v > hi]
+    # A consistent filter is inside 95% of the time on average, so half of consistent
+    # ensembles score a little less: allow 3 binomial standard deviations (counting
+    # the grid points as independent, which makes the allowance a lower bound).
+    scatter = 3 * np.sqrt(0.95 * 0.05 / max(1, n["points_after_convergence"]))
+    if frac["inside"] >= 0.95:
+        head = f"consistent: inside the bounds {100 * frac['inside']:.0f}% of the time"
+    elif frac["inside"] >= 0.95 - scatter:
+        head = (f"consistent within sampling scatter: inside the bounds "
+                f"{100 * frac['inside']:.1f}% of the time, just under 95%")
+    elif frac["below"] > frac["above"]:
+        head = (f"over-conservative: below the bounds {100 * frac['below']:.0f}% of the "
+                "time (the filter's σ is larger than its errors)")
+    else:
+        head = (f"over-confident: above the bounds {100 * frac['above']:.0f}% of the time "
+                "(errors larger than the filter's σ)")
+    parts = [head]
+    if low:
+        parts.append("states with (e/σ)² below 1: " + ", ".join(low))
+    if high:
+        parts.append("above 1: " + ", ".join(high))
+    lin = n.get("linear")
+    if lin and lin["mean_after_convergence"] is not None:
+        real, twin = n["mean_after_convergence"], lin["mean_after_convergence"]
+        if abs(real - twin) <= 0.05 * twin:
+            parts.append(f"the linear twin gives the same ({twin:.2f} against {real:.2f}), "
+                         "so the cause is the filter's model and tuning, not the linearization")
+        else:
+            parts.append(f"the linear twin gives {twin:.2f} against {real:.2f}: the "
+                         "linearization accounts for the difference")
+    return "; ".join(parts)
