@@ -7,6 +7,8 @@ figure lifted into a review still says where it came from.
 
 from __future__ import annotations
 
+import textwrap
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -52,7 +54,7 @@ def plot_ensemble_errors(d: dict, eq55_deg: float, n_runs: int, converged_h: flo
             ax.plot(t_h, d["rms_linear"][:, k], color="C2", lw=1, ls="--",
                     label="ensemble RMS error, linear twin")
         ax.plot(t_h, d["sigma_rms"][:, k], color="C3", lw=1.4, label="filter σ (RMS over runs)")
-        ax.plot(t_h, np.abs(d["mean_err"][:, k]), color="0.5", lw=0.7,
+        ax.plot(t_h, np.abs(d["mean_err"][:, k]), color="0.5", lw=0.5, alpha=0.6,
                 label="|ensemble mean error|")
         if k == 2:
             ax.axhline(eq55_deg, color="k", ls="-.", lw=1, label=f"Eq. 55 σ = {eq55_deg:.4f}°")
@@ -60,7 +62,7 @@ def plot_ensemble_errors(d: dict, eq55_deg: float, n_runs: int, converged_h: flo
         ax.set_yscale("log")
         ax.set_ylabel(f"{name} ({unit})")
         ax.grid(True, which="both", alpha=0.25)
-        ax.legend(loc="upper right", fontsize=8, ncol=2)
+        ax.legend(loc="lower right", fontsize=8, ncol=3, framealpha=0.9)
     axes[-1].set_xlabel("time (h)")
     axes[0].set_title("Monte Carlo accuracy: ensemble RMS error against the filter's σ "
                       "(dotted line: start of the NEES test)")
@@ -90,6 +92,8 @@ def plot_ensemble_nees(d: dict, summary: dict, converged_h: float, caption: str)
     ax.axhline(n["dof"], color="C1", lw=1, label=f"expected value {n['dof']}")
     _converged(ax, converged_h)
     ax.set_yscale("log")
+    ax.text(0.01, 0.02, "\n".join(textwrap.wrap(n["diagnosis"], 150)), transform=ax.transAxes,
+            fontsize=8, va="bottom", bbox=dict(facecolor="white", alpha=0.85, lw=0.5))
     ax.set_ylabel("NEES averaged over runs (9 states)")
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(loc="upper right", fontsize=8)
@@ -123,14 +127,14 @@ def plot_gap_end_yaw(d: dict, summary: dict, caption: str):
         e = d[f"gap{j}_yaw_error_deg"]
         sig = g["predicted_sigma_deg"]
         span = max(3.3 * sig, float(np.max(np.abs(e))) * 1.05)
-        bins = np.linspace(-span, span, 31)
+        bins = np.histogram_bin_edges(e, bins=max(10, int(np.sqrt(e.size) * 2)))
         ax.hist(e, bins=bins, color="C0", alpha=0.75, label=f"nonlinear truth (n = {g['n']})")
         if f"gap{j}_yaw_error_linear_deg" in d:
             ax.hist(d[f"gap{j}_yaw_error_linear_deg"], bins=bins, histtype="step", color="C2",
                     lw=1.3, label="linear twin")
-        for m, (name, q) in enumerate(g["abs_quantile_deg"].items(), start=1):
+        for m, q in enumerate(g["abs_quantile_deg"].values(), start=1):
             ax.axvline(q, color="C0", ls="-", lw=1.5 - 0.3 * m,
-                       label=f"ensemble {name}: {q:.4f}°")
+                       label=f"ensemble {m}σ (|error| quantile): {q:.4f}°")
             ax.axvline(-q, color="C0", ls="-", lw=1.5 - 0.3 * m)
             ax.axvline(m * sig, color="C3", ls="--", lw=1.5 - 0.3 * m,
                        label=f"filter {m}σ: {m * sig:.4f}°")
@@ -140,6 +144,7 @@ def plot_gap_end_yaw(d: dict, summary: dict, caption: str):
                      f"within filter 1σ/2σ/3σ: {100 * within['1sigma']:.0f}% / "
                      f"{100 * within['2sigma']:.0f}% / {100 * within['3sigma']:.0f}% "
                      "(Gaussian: 68 / 95 / 99.7)", fontsize=10)
+        ax.set_xlim(-span, span)
         ax.set_xlabel("yaw error at the end of the Sun gap (deg)")
         ax.set_ylabel("runs")
         ax.legend(fontsize=7.5, loc="upper left")
