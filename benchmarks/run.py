@@ -110,6 +110,28 @@ def main() -> None:
     report("linearization_report_wall_s",
            cli_wall_s("linearization", "goes_next_equinox", repeats=2), "s")
 
+    # Issue 7: 100 dispersed two-day cases of the default scenario with the filter,
+    # reduced on the workers, plus the ensemble figures: on every core, then through
+    # a local dask cluster (two single-threaded worker processes) for comparison.
+    report("montecarlo_100x2day_wall_s", montecarlo_wall_s(), "s")
+    from distributed import LocalCluster
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        report("montecarlo_dask_100x2day_wall_s",
+               montecarlo_wall_s("--scheduler", cluster.scheduler_address), "s")
+
+
+def montecarlo_wall_s(*extra: str, runs: int = 100, repeats: int = 2) -> float:
+    """Median wall time of a whole `dynprop montecarlo` set, each into a new
+    directory so that nothing is resumed."""
+    exe = str(Path(sys.executable).with_name("dynprop"))
+    with tempfile.TemporaryDirectory() as tmp:
+        sets = iter(range(repeats))
+        return median_time(lambda: subprocess.run(
+            [exe, "montecarlo", "goes_next_equinox", "--runs", str(runs), "--out",
+             f"{tmp}/set{next(sets)}", *extra], check=True, capture_output=True),
+            repeats=repeats, warmup=0)
+
 
 if __name__ == "__main__":
     main()
