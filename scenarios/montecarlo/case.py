@@ -24,7 +24,7 @@ from ..outputs import display_factors, sun_gaps
 from ..pipeline import run_scenario
 from ..runner import simulate
 from ..schema import Scenario
-from .dispersions import draw_case
+from .dispersions import UnphysicalDraw, draw_case
 
 RAD2DEG = 180.0 / np.pi
 # Where P's diagonal sits in its packed upper triangle (estimator.kalman.pack).
@@ -143,8 +143,11 @@ def run_case(s: Scenario, case: int, keep_full: bool = False) -> dict:
 
 
 def failed(case: int, exc: BaseException, wall_s: float = 0.0) -> dict:
+    """A failed case's outcome: the error, where it came from and, for a draw that is
+    not physical, the values drawn."""
     message = str(exc).splitlines()[0] if str(exc) else ""
-    return {"record": {"case": case, "status": "failed",
-                       "error": f"{type(exc).__name__}: {message}",
-                       "traceback": traceback.format_exception(exc)[-3:]},
-            "arrays": None, "full": None, "wall_s": wall_s}
+    record = {"case": case, "status": "failed", "error": f"{type(exc).__name__}: {message}",
+              "traceback": traceback.format_exception(exc)[-3:]}
+    if isinstance(exc, UnphysicalDraw):
+        record["dispersed"] = exc.values
+    return {"record": record, "arrays": None, "full": None, "wall_s": wall_s}

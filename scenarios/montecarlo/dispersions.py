@@ -17,7 +17,7 @@ import numpy as np
 from sim.ephemeris import parse_epoch
 
 from ..build import DISPERSION_STREAM
-from ..loader import validate
+from ..loader import ScenarioError, validate
 from ..schema import Scenario
 from .schema import Normal, Uniform
 
@@ -76,10 +76,18 @@ def _plain(a: np.ndarray):
     return float(a) if np.ndim(a) == 0 else [_plain(x) for x in a]
 
 
+class UnphysicalDraw(ScenarioError):
+    """A case whose drawn values fail validation; ``values`` says what was drawn."""
+
+    def __init__(self, message: str, values: dict):
+        super().__init__(message)
+        self.values = values
+
+
 def draw_case(s: Scenario, case: int) -> tuple[dict, Scenario]:
     """Case ``case``'s dispersed values {key: value} and its validated scenario.
 
-    Raises ``ScenarioError`` naming the key if a draw is not physical (say, an
+    Raises ``UnphysicalDraw`` naming the key if a draw is not physical (say, an
     inertia that is no longer positive definite)."""
     raw = s.model_dump(mode="json")
     values = {}
@@ -94,4 +102,7 @@ def draw_case(s: Scenario, case: int) -> tuple[dict, Scenario]:
             value = _plain(nominal + _offsets(d, nominal.shape, rng))
         _set(raw, key, value)
         values[key] = value
-    return values, validate(raw)
+    try:
+        return values, validate(raw)
+    except ScenarioError as exc:
+        raise UnphysicalDraw(str(exc), values) from None

@@ -83,22 +83,29 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
                "reproduce_case": command}
     if not ok:
         return summary, {}
-    stacks: dict[str, list] = {}
+    # Running sums over the cases, one case in memory at a time: a set of thousands
+    # of two-day cases never holds its grids all at once.
+    sums: dict[str, np.ndarray] = {}
+    linear = True
     for k in ok:
-        for name, a in load_arrays(k).items():
-            stacks.setdefault(name, []).append(a)
-    t_s = stacks["t_s"][0]
-    err = np.stack(stacks["err"]).astype(float)        # (M, G, 9), display units
-    sig = np.stack(stacks["sigma"]).astype(float)
-    nees = np.stack(stacks["nees"]).astype(float)      # (M, G)
-    linear = "err_linear" in stacks and len(stacks["err_linear"]) == len(ok)
+        a = load_arrays(k)
+        err, sig = a["err"].astype(float), a["sigma"].astype(float)
+        terms = {"err": err, "err2": err**2, "sig2": sig**2, "nsq": (err / sig) ** 2,
+                 "nees": a["nees"].astype(float)}
+        linear = linear and "err_linear" in a
+        if linear:
+            terms["err2_linear"] = a["err_linear"].astype(float) ** 2
+            terms["nees_linear"] = a["nees_linear"].astype(float)
+        for name, v in terms.items():
+            sums[name] = sums[name] + v if name in sums else v
+        t_s = a["t_s"]
     m = len(ok)
+    mean = {name: v / m for name, v in sums.items()}
     summary["grid_s"] = float(t_s[1] - t_s[0]) if len(t_s) > 1 else None
     conv = t_s >= s.montecarlo.converged_after_h * 3600
 
-    nees_avg = nees.mean(axis=0)
+    nees_avg, nsq = mean["nees"], mean["nsq"]          # (G,), (G, 9)
     bounds = chi2_bounds(N_STATES, m)
-    nsq = np.mean((err / sig) ** 2, axis=0)            # (G, 9)
     b1 = chi2_bounds(1, m)
     summary["nees"] = {
         "dof": N_STATES, "runs": m, "bounds_95": list(bounds),
@@ -109,21 +116,19 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
         "per_state_mean_after_convergence": dict(zip(
             STATE_COLUMNS, _mean(nsq[conv], axis=0) or [None] * N_STATES, strict=True)),
     }
-    fig = {"t_s": t_s, "rms": np.sqrt(np.mean(err**2, axis=0)),
-           "sigma_rms": np.sqrt(np.mean(sig**2, axis=0)), "nees_avg": nees_avg,
-           "nees_bounds": np.array(bounds), "nsq": nsq, "nsq_bounds": np.array(b1),
-           "mean_err": err.mean(axis=0)}
+    fig = {"t_s": t_s, "rms": np.sqrt(mean["err2"]), "sigma_rms": np.sqrt(mean["sig2"]),
+           "nees_avg": nees_avg, "nees_bounds": np.array(bounds), "nsq": nsq,
+           "nsq_bounds": np.array(b1), "mean_err": mean["err"]}
     if linear:
-        err_l = np.stack(stacks["err_linear"]).astype(float)
-        nees_l = np.stack(stacks["nees_linear"]).astype(float).mean(axis=0)
+        nees_l = mean["nees_linear"]
         summary["nees"]["linear"] = {
             "mean_after_convergence": _mean(nees_l[conv]),
             "fraction_after_convergence": _fraction(nees_l[conv], *bounds)}
-        fig["rms_linear"] = np.sqrt(np.mean(err_l**2, axis=0))
+        fig["rms_linear"] = np.sqrt(mean["err2_linear"])
         fig["nees_avg_linear"] = nees_l
     summary["rms_after_convergence"] = {
-        name: {"ensemble_rms": _root(_mean(err[:, conv, k] ** 2)),
-               "filter_sigma_rms": _root(_mean(sig[:, conv, k] ** 2))}
+        name: {"ensemble_rms": _root(_mean(mean["err2"][conv, k])),
+               "filter_sigma_rms": _root(_mean(mean["sig2"][conv, k]))}
         for name, k in (("roll_deg", R), ("yaw_deg", Y), ("h_Nms", H_WHEEL))}
 
     # Yaw at the end of each Sun gap (gap j of every case: same local time, since

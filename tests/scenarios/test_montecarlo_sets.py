@@ -92,6 +92,8 @@ def test_failing_cases_are_recorded_and_do_not_stop_the_set(failing_set):
         rec = json.loads((out / "cases" / f"case-{k:05d}.json").read_text())
         assert rec["case"] == k and rec["status"] == "failed"
         assert "sensors.earth.noise_deg" in rec["error"]
+        # The record says what was drawn: the negative noise that made the case fail.
+        assert rec["dispersed"]["sensors.earth.noise_deg"] < 0
         assert not (out / "cases" / f"case-{k:05d}.npz").exists()
     for k in good:
         rec = json.loads((out / "cases" / f"case-{k:05d}.json").read_text())
