@@ -287,10 +287,11 @@ COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd
 def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
     from .loader import ScenarioError
+    from .montecarlo import SchedulerError
     from .rundir import RunDirError
     try:
         return COMMANDS[args.command](args)
-    except (InputError, RunDirError, ScenarioError) as exc:
+    except (InputError, RunDirError, ScenarioError, SchedulerError) as exc:
         print(f"dynprop: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:

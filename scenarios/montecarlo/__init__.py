@@ -4,3 +4,7 @@ dispersions (what varies and how it is drawn) → case (one dispersed run, reduc
 the worker) → store (one file pair per finished case) → execute (local processes or
 dask.distributed) → stats (ensemble figures and montecarlo.json).
 """
+
+
+class SchedulerError(ValueError):
+    """--scheduler names no reachable dask scheduler (or dask is not installed)."""

@@ -18,9 +18,11 @@ from concurrent.futures.process import BrokenProcessPool
 
 from ..loader import resolved_yaml
 from ..schema import Scenario
+from . import SchedulerError
 from .case import failed, run_case
 
 WORKER_MODULE = "scenarios.montecarlo.case"
+CONNECT_TIMEOUT_S = 20.0  # how long --scheduler may take to answer
 
 
 def default_workers() -> int:
@@ -84,31 +86,38 @@ def run_local(s: Scenario, cases: list[int], keep: Iterable[int], workers: int,
         bar.close()
 
 
-def run_dask(s: Scenario, cases: list[int], keep: Iterable[int], address: str,
-             on_done: Callable[[dict], None], done_before: int = 0, total: int = 0) -> None:
-    """The same cases on an existing dask.distributed cluster at ``address``."""
+def connect(address: str):
+    """A dask.distributed Client on ``address``, or SchedulerError in one line."""
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError:
-        raise RuntimeError("--scheduler needs dask.distributed: pip install "
-                           "'dynprop[dask]'") from None
+        raise SchedulerError("--scheduler needs dask.distributed: pip install "
+                             "'dynprop[dask]'") from None
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT_S)
+    except (OSError, ValueError, TypeError) as exc:
+        raise SchedulerError(f"--scheduler {address}: cannot connect ({exc})") from None
+
+
+def run_dask(s: Scenario, cases: list[int], keep: Iterable[int], client,
+             on_done: Callable[[dict], None], done_before: int = 0, total: int = 0) -> None:
+    """The same cases on an existing dask.distributed cluster, through ``client``."""
+    from distributed import as_completed
     keep = set(keep)
     # Keys name this very set, so two sets on one cluster never share results.
     digest = hashlib.sha256(resolved_yaml(s).encode()).hexdigest()[:12]
     bar = _progress(total or len(cases), done_before, "montecarlo (dask)")
     try:
-        with Client(address, timeout="20s") as client:
-            futures = {client.submit(run_case, s, k, k in keep, pure=False,
-                                     key=f"dynprop-{digest}-case-{k}"): k
-                       for k in cases}
-            for fut in as_completed(futures):
-                k = futures[fut]
-                try:
-                    outcome = fut.result()
-                except Exception as exc:  # a worker lost for good (KilledWorker, ...)
-                    outcome = failed(k, exc)
-                on_done(outcome)
-                fut.release()
-                bar.update()
+        futures = {client.submit(run_case, s, k, k in keep, pure=False,
+                                 key=f"dynprop-{digest}-case-{k}"): k for k in cases}
+        for fut in as_completed(futures):
+            k = futures[fut]
+            try:
+                outcome = fut.result()
+            except Exception as exc:  # a worker lost for good (KilledWorker, ...)
+                outcome = failed(k, exc)
+            on_done(outcome)
+            fut.release()
+            bar.update()
     finally:
         bar.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 from dataclasses import dataclass
@@ -10,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..schema import Scenario
-from .execute import default_workers, run_dask, run_local
+from .execute import connect, default_workers, run_dask, run_local
 from .stats import ensemble
 from .store import SetDirectory, atomic_write
 
@@ -37,17 +38,19 @@ def run_set(s: Scenario, n_runs: int, out: Path, workers: int | None = None,
             retry_failed: bool = False, command: str = "") -> SetResult:
     """Cases 0 … n_runs−1 of ``s``'s dispersions, skipping those already stored in
     ``out``; then montecarlo.json, montecarlo.npz and the figures."""
-    store = SetDirectory(out)
-    resumed = store.open(s, force)
-    store.clean_temporaries()
-    keep = {k for k in keep if k < n_runs}
-    todo = pending_cases(store, n_runs, keep, retry_failed)
-    if todo:
-        kwargs = dict(on_done=store.save, done_before=n_runs - len(todo), total=n_runs)
-        if scheduler:
-            run_dask(s, todo, keep, scheduler, **kwargs)
-        else:
-            run_local(s, todo, keep, workers or default_workers(), **kwargs)
+    # Connect first: an unreachable scheduler must not leave a new directory behind.
+    with connect(scheduler) if scheduler else contextlib.nullcontext() as client:
+        store = SetDirectory(out)
+        resumed = store.open(s, force)
+        store.clean_temporaries()
+        keep = {k for k in keep if k < n_runs}
+        todo = pending_cases(store, n_runs, keep, retry_failed)
+        if todo:
+            kwargs = dict(on_done=store.save, done_before=n_runs - len(todo), total=n_runs)
+            if client is not None:
+                run_dask(s, todo, keep, client, **kwargs)
+            else:
+                run_local(s, todo, keep, workers or default_workers(), **kwargs)
     summary = write_results(s, store, n_runs, command)
     return SetResult(summary, len(todo), resumed)
 

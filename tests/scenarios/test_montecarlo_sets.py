@@ -462,3 +462,14 @@ def test_set_writes_figures_and_montecarlo_json(twin_set):
     with np.load(twin_set / "montecarlo.npz") as fig:
         assert np.array_equal(fig["t_s"], t)
         assert fig["nees_avg"] == pytest.approx(nees_avg, rel=1e-12)
+
+
+def test_an_unreachable_scheduler_exits_2_and_writes_nothing(tmp_path, monkeypatch):
+    from scenarios.montecarlo import execute
+    monkeypatch.setattr(execute, "CONNECT_TIMEOUT_S", 1.0)
+    out = tmp_path / "set"
+    rc, _, err = run_cli("montecarlo", "goes_next_equinox", "--runs", 2, "--duration-s", 600,
+                         "--scheduler", "tcp://127.0.0.1:1", "--out", out)
+    assert rc == 2
+    assert assert_one_line(err).startswith("dynprop: error: --scheduler tcp://127.0.0.1:1: ")
+    assert not out.exists()
