@@ -54,11 +54,21 @@ def project_torques(t_s, nx, nz, w0):
     """Least-squares fit N_x = N_cx + c0 a + s0 b, N_z = N_cz − s0 a + c0 b (Eqs. 9, 18).
     Returns the torque-state histories (N, 4) [N_px, N_pz, N_cx, N_cz] and residuals."""
     c, s = np.cos(w0 * t_s), np.sin(w0 * t_s)
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    # Unknowns (a, b, N_cx, N_cz).
-    A = np.vstack([np.column_stack([c, s, one, zero]), np.column_stack([-s, c, zero, one])])
-    coef = np.linalg.lstsq(A, np.concatenate([nx, nz]), rcond=None)[0]
-    a, b, ncx, ncz = coef
+    one = np.ones_like(c)
+    # Unknowns (a, b, N_cx, N_cz).  The normal equations need only a few sums over
+    # the run (no 2N×4 matrix): with c² + s² = 1 they are well conditioned once the
+    # run covers a fair part of an orbit; shorter runs go to lstsq (minimum norm).
+    n, sc, ss = len(c), c.sum(), s.sum()
+    G = np.array([[n, 0.0, sc, -ss], [0.0, n, ss, sc], [sc, ss, n, 0.0], [-ss, sc, 0.0, n]])
+    # np.sum, not BLAS dot: a threaded BLAS sums in an order that depends on the
+    # thread count, and a Monte Carlo case must give the same bits in any process.
+    rhs = np.array([np.sum(c * nx - s * nz), np.sum(s * nx + c * nz), nx.sum(), nz.sum()])
+    if n and np.linalg.cond(G) < 1e4:
+        a, b, ncx, ncz = np.linalg.solve(G, rhs)
+    else:
+        zero = np.zeros_like(c)
+        A = np.vstack([np.column_stack([c, s, one, zero]), np.column_stack([-s, c, zero, one])])
+        a, b, ncx, ncz = np.linalg.lstsq(A, np.concatenate([nx, nz]), rcond=None)[0]
     states = np.column_stack([c * a + s * b, -s * a + c * b, ncx * one, ncz * one])
     return states, nx - states[:, 0] - ncx, nz - states[:, 1] - ncz
 
