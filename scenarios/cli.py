@@ -269,9 +269,10 @@ def _cmd_montecarlo(args) -> int:
               file=sys.stderr)
         return 130
     s = result.summary
-    verb = "resumed" if result.resumed else "ran"
-    print(f"{scenario.name}: {verb} {result.ran} of {args.runs} cases in "
-          f"{time.perf_counter() - start:.1f} s; {one_line(s)}")
+    verb = "resumed" if result.resumed else "new"
+    print(f"{scenario.name}: {verb} set, ran {result.ran} of {args.runs} cases "
+          f"({args.runs - result.ran} already stored) in {time.perf_counter() - start:.1f} s; "
+          f"{one_line(s)}")
     for f in s["failed"]:
         print(f"  case {f['case']} failed: {f['error']}", file=sys.stderr)
     print(f"wrote {args.out}/montecarlo.json and {args.out}/plots/")

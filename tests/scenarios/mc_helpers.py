@@ -23,7 +23,7 @@ STATES = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms",
 YAW = STATES.index("yaw_deg")
 FIGURES = ("mc_errors.png", "mc_nees.png", "mc_gap_yaw.png")
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-RAN = re.compile(r": (ran|resumed) (\d+) of (\d+) cases")
+RAN = re.compile(r": (new|resumed) set, ran (\d+) of (\d+) cases")
 
 # 19:00 local at 75° W the day after the equinox: the night Sun gap (~20:15–04:05
 # local) falls ~1.3–9.1 h into the run, so 10 h hold one whole gap and its end.
@@ -61,10 +61,13 @@ def montecarlo(out: Path, runs: int, *extra: str, workers: int = 2) -> tuple[int
 
 
 def ran(stdout: str) -> tuple[str, int, int]:
-    """("ran" | "resumed", cases run now, cases in the set) from the summary line."""
+    """("ran" for a new set | "resumed", cases run now, cases in the set) from the
+    summary line, which also says how many were already stored."""
     m = RAN.search(stdout)
-    assert m, f"no 'ran/resumed N of M cases' in {stdout!r}"
-    return m.group(1), int(m.group(2)), int(m.group(3))
+    assert m, f"no 'new/resumed set, ran N of M cases' in {stdout!r}"
+    n, total = int(m.group(2)), int(m.group(3))
+    assert f"({total - n} already stored)" in stdout
+    return ("ran" if m.group(1) == "new" else "resumed"), n, total
 
 
 def assert_one_line(err: str) -> str:
