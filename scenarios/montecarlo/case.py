@@ -57,15 +57,12 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
     rows of ``case_rows``."""
     n, dt = len(runs.truth_model), s.sample_interval_s
     grid, gaps, rows = case_rows(s, n, yaw_present)
-    if runs.rows is None:
-        def at(a):
-            return a[rows]
-    else:
-        if not np.array_equal(runs.rows, rows):
-            raise ValueError("the filter history was kept at other rows than case_rows")
+    full = runs.rows is None
+    if not full and not np.array_equal(runs.rows, rows):
+        raise ValueError("the filter history was kept at other rows than case_rows")
 
-        def at(a):
-            return a
+    def at(a):
+        return a[rows] if full else a
     on_grid = np.searchsorted(rows, grid)
     f = display_factors(runs.params.omega_n_radps)
     truth = runs.truth_model[rows]
