@@ -108,7 +108,7 @@ def _build_parser() -> argparse.ArgumentParser:
     _scenario_args(lin)
     lin.add_argument("--out", required=True, type=Path, help="new report directory")
     lin.add_argument("--force", action="store_true", help="replace a non-empty --out")
-    plot = sub.add_parser("plot", help="(re)draw the figures of a run directory")
+    plot = sub.add_parser("plot", help="(re)draw the figures of a run or Monte Carlo directory")
     plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser
 
@@ -192,7 +192,11 @@ def _cmd_scenarios(args) -> int:
 
 def _cmd_plot(args) -> int:
     from .plotting import plot_run
-    written = plot_run(args.run_dir)
+    if (args.run_dir / "montecarlo.json").is_file():
+        from .montecarlo.runset import redraw
+        written = redraw(args.run_dir)
+    else:
+        written = plot_run(args.run_dir)
     for path in written:
         print(path)
     return 0

@@ -68,6 +68,21 @@ def write_results(s: Scenario, store: SetDirectory, n_runs: int, command: str) -
     return summary
 
 
+def redraw(out: Path) -> list[Path]:
+    """`dynprop plot` on a set directory: the figures again from montecarlo.json and
+    montecarlo.npz, without touching a case."""
+    from ..loader import load_scenario
+    out = Path(out)
+    s = load_scenario(out / "scenario.yaml")
+    summary = json.loads((out / "montecarlo.json").read_text())
+    with np.load(out / "montecarlo.npz") as data:
+        fig = {k: data[k] for k in data.files}
+    if not fig:
+        return []
+    draw_figures(out / "plots", s, summary, fig, summary["reproduce_case"])
+    return [out / "plots" / name for name in FIGURES]
+
+
 def caption(s: Scenario, summary: dict, command: str) -> str:
     failed = f", {summary['runs_failed']} failed" if summary["runs_failed"] else ""
     return (f"scenario {s.name}, seed {s.seed}, {summary['runs_ok']} runs{failed}; "

@@ -473,3 +473,24 @@ def test_an_unreachable_scheduler_exits_2_and_writes_nothing(tmp_path, monkeypat
     assert rc == 2
     assert assert_one_line(err).startswith("dynprop: error: --scheduler tcp://127.0.0.1:1: ")
     assert not out.exists()
+
+
+def test_plot_redraws_a_sets_figures_from_its_results(twin_set, tmp_path):
+    out = tmp_path / "set"
+    shutil.copytree(twin_set, out)
+    cases_before = case_files(out / "cases")
+    shutil.rmtree(out / "plots")
+    rc, stdout, err = run_cli("plot", out)
+    assert rc == 0, err
+    for name in FIGURES:
+        assert (out / "plots" / name).read_bytes().startswith(PNG_MAGIC)
+        assert str(out / "plots" / name) in stdout
+    assert case_files(out / "cases") == cases_before
+
+
+def test_set_files_get_the_users_usual_permissions(twin_set):
+    umask = os.umask(0)
+    os.umask(umask)
+    for path in [twin_set / "montecarlo.json", *(twin_set / "cases").iterdir(),
+                 *(twin_set / "plots").iterdir()]:
+        assert path.stat().st_mode & 0o777 == 0o666 & ~umask, path
