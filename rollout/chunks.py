@@ -52,31 +52,43 @@ class ChunkedRollout:
             ) -> tuple[np.ndarray, np.ndarray]:
         """One step per row of the (N, k_j) ``inputs``.  Returns the carried states
         (N+1, n_x) including x0, and the aux outputs (N, n_aux)."""
-        arrays = [np.ascontiguousarray(a, dtype=float).reshape(len(a), -1) for a in inputs]
+        arrays = _as_rows(inputs)
         n_steps = len(arrays[0]) if arrays else 0
         states = np.empty((n_steps + 1, np.size(x0)))
         states[0] = x0
         aux = np.empty((n_steps, self.n_aux))
-        p = np.ascontiguousarray(p, dtype=float)
-        n_main = n_steps - n_steps % self.chunk
-        _run(self.function, self.chunk, 0, n_main, states, aux, arrays, p)
-        _run(self.tail_function, self.tail_chunk, n_main, n_steps, states, aux, arrays, p)
+        for start, stop, x_out, a_out in self._chunks(x0, arrays, p, states, aux):
+            if x_out.base is not states:  # a short chunk ran in scratch
+                states[start + 1:stop + 1] = x_out[:stop - start]
+                aux[start:stop] = a_out[:stop - start]
         return states, aux
-
 
     def run_rows(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
                  rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Like ``run``, but keep only the aux outputs of the steps ``rows`` (sorted)
-        and the final carried state.  Each chunk is written into one reused scratch
+        and the final carried state.  Every chunk is written into one reused scratch
         block, so a long rollout's memory traffic stays in cache; the kept values
         equal ``run``'s bit for bit (same compiled functions, same chunking)."""
-        arrays = [np.ascontiguousarray(a, dtype=float).reshape(len(a), -1) for a in inputs]
+        arrays = _as_rows(inputs)
         n_steps = len(arrays[0]) if arrays else 0
         rows = np.asarray(rows, dtype=np.int64)
         if rows.size and (rows[0] < 0 or rows[-1] >= n_steps or np.any(np.diff(rows) <= 0)):
             raise ValueError("rows must be increasing step indices within the rollout")
-        p = np.ascontiguousarray(p, dtype=float)
         kept = np.empty((len(rows), self.n_aux))
+        x = np.array(x0, dtype=float).reshape(-1)
+        for start, stop, x_out, a_out in self._chunks(x0, arrays, p):
+            lo, hi = np.searchsorted(rows, [start, stop])
+            kept[lo:hi] = a_out[rows[lo:hi] - start]
+            x = x_out[stop - start - 1].copy()
+        return x, kept
+
+    def _chunks(self, x0, arrays, p, states=None, aux=None):
+        """Roll out every chunk, yielding (start, stop, x_out, a_out): the chunk's
+        carried states and aux outputs, rows 0 … stop−start−1 valid.  Full chunks
+        write straight into ``states[start+1:]`` and ``aux[start:]`` when given;
+        otherwise (and for a short, padded final chunk) into a reused scratch block."""
+        n_steps = len(arrays[0]) if arrays else 0
+        p = np.ascontiguousarray(p, dtype=float)
         x = np.array(x0, dtype=float).reshape(-1)
         n_main = n_steps - n_steps % self.chunk
         for function, c, begin, end in ((self.function, self.chunk, 0, n_main),
@@ -84,67 +96,41 @@ class ChunkedRollout:
                                          n_steps)):
             if begin == end:
                 continue
-            x_in = np.empty(x.size)
-            states = np.empty((c, x.size))
-            aux = np.empty((c, self.n_aux))
-            blocks = [np.empty((c, a.shape[1])) for a in arrays]
-            # One buffer per function, bound once to the scratch arrays: only their
-            # contents change from chunk to chunk.
+            # One buffer per function: binding pointers per chunk is cheap, making
+            # a buffer is not.  It keeps raw pointers, so everything bound must stay
+            # alive until run(), and outputs must be views, not silent copies.
             buf, run = function.buffer()
+            x_in = np.empty(x.size)
+            scratch_x, scratch_a = np.empty((c, x.size)), np.empty((c, self.n_aux))
+            padded = [np.empty((c, a.shape[1])) for a in arrays]
             buf.set_arg(0, memoryview(x_in))
-            for i, blk in enumerate(blocks, start=1):
-                buf.set_arg(i, memoryview(blk.reshape(-1)))
-            buf.set_arg(len(blocks) + 1, memoryview(p))
-            buf.set_res(0, memoryview(states.reshape(-1)))
-            buf.set_res(1, memoryview(aux.reshape(-1)))
+            buf.set_arg(len(arrays) + 1, memoryview(p))
             for start in range(begin, end, c):
                 stop = min(start + c, end)
+                n = stop - start
+                for i, (a, blk) in enumerate(zip(arrays, padded, strict=True), start=1):
+                    if n < c:  # pad by repeating the last row: computed and discarded
+                        blk[:n] = a[start:stop]
+                        blk[n:] = a[stop - 1]
+                    else:
+                        blk = a[start:stop]
+                    buf.set_arg(i, memoryview(blk.reshape(-1)))
+                if states is not None and n == c:
+                    x_out, a_out = states[start + 1:stop + 1], aux[start:stop]
+                else:
+                    x_out, a_out = scratch_x, scratch_a
+                x_flat, a_flat = x_out.reshape(-1), a_out.reshape(-1)
+                assert np.shares_memory(x_flat, x_out) and np.shares_memory(a_flat, a_out)
+                buf.set_res(0, memoryview(x_flat))
+                buf.set_res(1, memoryview(a_flat))
                 x_in[:] = x
-                for blk, a in zip(blocks, arrays, strict=True):
-                    blk[:stop - start] = a[start:stop]
-                    blk[stop - start:] = a[stop - 1]  # padding, computed and discarded
                 run()
                 if buf.ret() != 0:
                     raise RuntimeError(f"{function.name()} failed in the chunk starting at "
                                        f"step {start}")
-                x = states[stop - start - 1].copy()
-                lo, hi = np.searchsorted(rows, [start, stop])
-                kept[lo:hi] = aux[rows[lo:hi] - start]
-        return x, kept
+                x = x_out[n - 1].copy()
+                yield start, stop, x_out, a_out
 
 
-def _run(function, c, begin, end, states, aux, arrays, p) -> None:
-    buf, run = function.buffer()
-    nx = states.shape[1]
-    for start in range(begin, end, c):
-        stop = min(start + c, end)
-        full = stop - start == c
-        blocks = [a[start:stop] if full else _pad(a[start:stop], c) for a in arrays]
-        x_out = states[start + 1:stop + 1] if full else np.empty((c, nx))
-        a_out = aux[start:stop] if full else np.empty((c, aux.shape[1]))
-        x_in = states[start].copy()
-        # The buffer keeps raw pointers: every array must stay alive until run(),
-        # and outputs must be views into states/aux, not silent copies.
-        x_flat, a_flat = x_out.reshape(-1), a_out.reshape(-1)
-        assert np.shares_memory(x_flat, x_out) and np.shares_memory(a_flat, a_out)
-        buf.set_arg(0, memoryview(x_in))
-        for i, blk in enumerate(blocks, start=1):
-            buf.set_arg(i, memoryview(blk.reshape(-1)))
-        buf.set_arg(len(blocks) + 1, memoryview(p))
-        buf.set_res(0, memoryview(x_flat))
-        buf.set_res(1, memoryview(a_flat))
-        run()
-        if buf.ret() != 0:
-            raise RuntimeError(f"{function.name()} failed in the chunk starting at step {start}")
-        if not full:
-            states[start + 1:stop + 1] = x_out[:stop - start]
-            aux[start:stop] = a_out[:stop - start]
-
-
-def _pad(block: np.ndarray, rows: int) -> np.ndarray:
-    """Pad a short final chunk by repeating its last row (the extra steps are
-    computed and discarded)."""
-    out = np.empty((rows, block.shape[1]))
-    out[:len(block)] = block
-    out[len(block):] = block[-1]
-    return out
+def _as_rows(inputs: list[np.ndarray]) -> list[np.ndarray]:
+    return [np.ascontiguousarray(a, dtype=float).reshape(len(a), -1) for a in inputs]
