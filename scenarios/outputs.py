@@ -70,6 +70,13 @@ def _mean_or_none(a) -> float | None:
     return float(a.mean()) if a.size else None
 
 
+def eq55_sigma_yaw_deg(s: Scenario, params) -> float:
+    """The paper's steady-state yaw σ, √(q/(ω0 H²)) (Eq. 55), with q the mean of the
+    scenario's roll and yaw torque noise, in degrees."""
+    q = 0.5 * (s.estimator.process_noise.q_x + s.estimator.process_noise.q_z)
+    return float(np.sqrt(approx_yaw_variance(q, params.H_Nms, params.omega0_radps))) * RAD2DEG
+
+
 def summarize(s: Scenario, runs, t_s, yaw_present, nees_data) -> dict:
     """summary.json: the figures of the run (DESIGN.md section 6 keys included).
     No wall-clock time: the same scenario and seed must give the same bytes."""
@@ -80,8 +87,7 @@ def summarize(s: Scenario, runs, t_s, yaw_present, nees_data) -> dict:
     dt = s.sample_interval_s
     gaps = sun_gaps(yaw_present, dt, s.estimator.sun_gap_min_h)
     ends = [b for _, b in gaps if b < len(t_s)]
-    q = 0.5 * (s.estimator.process_noise.q_x + s.estimator.process_noise.q_z)
-    eq55 = float(np.sqrt(approx_yaw_variance(q, p.H_Nms, p.omega0_radps))) * RAD2DEG
+    eq55 = eq55_sigma_yaw_deg(s, p)
     _, n_real, n_lin = nees_data
     nees_b = chi2_bounds(N_STATES, 1)
     nis_b = chi2_bounds(1, 1)

@@ -212,11 +212,14 @@ def truth_torques(truth, model_torques, omega0_radps: float) -> TruthTorques:
     return TruthTorques(euler_rates(truth.euler_rad, truth.w_br_radps), states, res_x, res_z)
 
 
-def model_truth(params: em.ModelParams, truth, tt: TruthTorques) -> np.ndarray:
-    """The nonlinear truth in the coordinates of the model ``params`` (N, 9)."""
+def model_truth(params: em.ModelParams, truth, tt: TruthTorques, rows=slice(None)
+                ) -> np.ndarray:
+    """The nonlinear truth in the coordinates of the model ``params``: (N, 9), or
+    only the samples ``rows``."""
     wn = params.omega_n_radps
-    return np.column_stack([truth.roll_rad, tt.rates[:, 1] / wn, truth.yaw_rad,
-                            tt.rates[:, 0] / wn, truth.h_Nms, tt.torque_states])
+    return np.column_stack([truth.roll_rad[rows], tt.rates[rows, 1] / wn, truth.yaw_rad[rows],
+                            tt.rates[rows, 0] / wn, truth.h_Nms[rows],
+                            tt.torque_states[rows]])
 
 
 def linear_twin(s: Scenario, truth, run: int, model_torques, tt: TruthTorques):
@@ -230,7 +233,7 @@ def linear_twin(s: Scenario, truth, run: int, model_torques, tt: TruthTorques):
     mt = model_torques
     nw_true = np.append(np.diff(truth.h_Nms) / s.sample_interval_s, 0.0)
     u_twin = em.input_vector(params, mt.roll_Nm + tt.res_x, mt.yaw_Nm + tt.res_z, nw_true)
-    twin = propagate_linear(disc, model_truth(params, truth, tt)[0], u_twin)
+    twin = propagate_linear(disc, model_truth(params, truth, tt, [0])[0], u_twin)
     k = build.yaw_factors(s)
     speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms, k / (k @ k))
     c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)

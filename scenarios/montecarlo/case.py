@@ -17,7 +17,7 @@ import numpy as np
 
 from estimator.consistency import nees
 from estimator.kalman import unpack
-from estimator.model import H_WHEEL, N_STATES, R, Y
+from estimator.model import H_WHEEL, R, Y
 
 from ..columns import telemetry_columns
 from ..outputs import display_factors, sun_gaps
@@ -27,9 +27,6 @@ from ..schema import Scenario
 from .dispersions import UnphysicalDraw, draw_case
 
 RAD2DEG = 180.0 / np.pi
-# Where P's diagonal sits in its packed upper triangle (estimator.kalman.pack).
-_DIAG = np.array([k for k, (i, j) in enumerate(zip(*np.triu_indices(N_STATES), strict=True))
-                  if i == j])
 
 
 def grid_stride(s: Scenario) -> int:
@@ -60,19 +57,23 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
     full = runs.rows is None
     if not full and not np.array_equal(runs.rows, rows):
         raise ValueError("the filter history was kept at other rows than case_rows")
-
-    def at(a):
-        return a[rows] if full else a
     on_grid = np.searchsorted(rows, grid)
-    f = display_factors(runs.params.omega_n_radps)
-    truth = runs.truth_model[rows]
-    x, P = at(runs.real.x), at(runs.real.P_packed)
-    err = x - truth
-    sigma = np.sqrt(P[:, _DIAG])
-    nees_real = nees(x, unpack(P), truth)
     converged = grid * dt >= s.montecarlo.converged_after_h * 3600
     ends = [b for _, b in gaps if b < n]
     at_end = np.searchsorted(rows, ends)
+    f = display_factors(runs.params.omega_n_radps)
+
+    def against(result, truth_states):
+        """Errors, σ and NEES of one filter history at ``rows``, against its truth."""
+        x, P = (result.x[rows], result.P_packed[rows]) if full else (result.x, result.P_packed)
+        sigma = result.sigma[rows] if full else result.sigma
+        truth = truth_states[rows]
+        err = x - truth
+        nees_on_grid = nees(x, unpack(P), truth)[on_grid]
+        mean = float(np.mean(nees_on_grid[converged])) if converged.any() else None
+        return err, sigma, nees_on_grid, mean
+
+    err, sigma, nees_real, nees_mean = against(runs.real, runs.truth_model)
     record = {
         "case": case, "status": "ok", "seed": s.seed, "spawn_key": [case],
         "dispersed": dispersed, "epoch_utc": epoch_utc, "backend": runs.real.backend,
@@ -84,25 +85,20 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
         "yaw_error_rms_deg": _rms(err[on_grid, Y]) * RAD2DEG,
         "h_error_rms_Nms": _rms(err[on_grid, H_WHEEL]),
         "yaw_error_max_abs_deg": float(np.max(np.abs(err[on_grid, Y]))) * RAD2DEG,
-        "nees_mean": float(np.mean(nees_real[on_grid][converged])) if converged.any()
-        else None,
+        "nees_mean": nees_mean,
     }
     arrays = {"t_s": (grid * dt).astype(np.float64),
               "err": (err[on_grid] * f).astype(np.float32),
               "sigma": (sigma[on_grid] * np.abs(f)).astype(np.float32),
-              "nees": nees_real[on_grid].astype(np.float32)}
+              "nees": nees_real.astype(np.float32)}
     if runs.linear is not None:
-        twin = runs.twin_model[rows]
-        xl, Pl = at(runs.linear.x), at(runs.linear.P_packed)
-        err_l = xl - twin
-        nees_lin = nees(xl, unpack(Pl), twin)
+        err_l, _, nees_lin, nees_mean_lin = against(runs.linear, runs.twin_model)
         record["yaw_error_linear_at_gap_end_deg"] = [float(err_l[i, Y] * RAD2DEG)
                                                      for i in at_end]
         record["yaw_error_rms_linear_deg"] = _rms(err_l[on_grid, Y]) * RAD2DEG
-        record["nees_mean_linear"] = (float(np.mean(nees_lin[on_grid][converged]))
-                                      if converged.any() else None)
+        record["nees_mean_linear"] = nees_mean_lin
         arrays["err_linear"] = (err_l[on_grid] * f).astype(np.float32)
-        arrays["nees_linear"] = nees_lin[on_grid].astype(np.float32)
+        arrays["nees_linear"] = nees_lin.astype(np.float32)
     return record, arrays
 
 

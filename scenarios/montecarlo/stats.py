@@ -14,23 +14,16 @@ from __future__ import annotations
 import numpy as np
 
 from estimator.consistency import chi2_bounds
-from estimator.covariance import approx_yaw_variance
 from estimator.model import H_WHEEL, N_STATES, R, Y
 
 from .. import __version__
 from ..build import estimator_model
-from ..outputs import STATE_COLUMNS
+from ..outputs import STATE_COLUMNS, eq55_sigma_yaw_deg
 from ..schema import Scenario
 
 RAD2DEG = 180.0 / np.pi
 # |e| quantiles that a Gaussian puts at 1σ, 2σ and 3σ.
 SIGMA_LEVELS = {"1sigma": 0.682689492, "2sigma": 0.954499736, "3sigma": 0.997300204}
-
-
-def eq55_sigma_yaw_deg(s: Scenario) -> float:
-    params, _ = estimator_model(s)
-    q = 0.5 * (s.estimator.process_noise.q_x + s.estimator.process_noise.q_z)
-    return float(np.sqrt(approx_yaw_variance(q, params.H_Nms, params.omega0_radps))) * RAD2DEG
 
 
 def _fraction(v, lo, hi) -> dict | None:
@@ -79,7 +72,7 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
                "runs_missing": n_runs - len(wanted), "failed": fails,
                "dispersions": {k: d.model_dump() for k, d in s.montecarlo.dispersions.items()},
                "grid_s": None, "converged_after_h": s.montecarlo.converged_after_h,
-               "analytic_sigma_yaw_deg": eq55_sigma_yaw_deg(s),
+               "analytic_sigma_yaw_deg": eq55_sigma_yaw_deg(s, estimator_model(s)[0]),
                "reproduce_case": command}
     if not ok:
         return summary, {}
