@@ -29,7 +29,7 @@ COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": e
            "N_cx": em.NCX, "N_cz": em.NCZ}
 
 
-def _save(fig, path: Path) -> Path:
+def save_figure(fig, path: Path) -> Path:
     # Write beside the target and rename, so a figure is never half written.
     tmp = path.with_name(f".{path.name}.tmp")
     fig.savefig(tmp, dpi=120, format="png")
@@ -41,7 +41,7 @@ def _save(fig, path: Path) -> Path:
 
 def _draw(job) -> Path:
     function, args, path = job
-    return _save(function(*args), path)
+    return save_figure(function(*args), path)
 
 
 def _draw_all(jobs) -> list[Path]:
@@ -119,12 +119,12 @@ def plot_run(run_dir: Path) -> list[Path]:
     sources = sorted({k[:-5] for k in truth if k.endswith("_x_Nm")}
                      - {"wheel_ripple", "wheel_input", "external"})
     torques = {s: np.column_stack([truth[f"{s}_{a}_Nm"] for a in "xyz"]) for s in sources}
-    written = [_save(plot_truth(
+    written = [save_figure(plot_truth(
         truth["t_s"], {n: truth[f"{n}_deg"] for n in ("yaw", "roll", "pitch")}, truth["h_Nms"],
         torques, truth["eclipse"] > 0, f"Truth: {title}"), out / "truth.png")]
     heads = [k[:-10] for k in tel if k.endswith("_alpha_deg")]
     sun_head = np.where(np.isfinite(tel["sun_head"]), tel["sun_head"], -1).astype(int)
-    written.append(_save(plot_telemetry(
+    written.append(save_figure(plot_telemetry(
         tel["t_s"], truth["yaw_deg"], tel["yaw_deg"], tel["yaw_sigma_deg"], sun_head, heads,
         tel["roll_deg"] - truth["roll_deg"], tel["pitch_deg"] - truth["pitch_deg"],
         ~np.isfinite(tel["yaw_deg"]), f"Telemetry: {title}"), out / "telemetry.png"))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,7 +12,7 @@ import numpy as np
 from ..schema import Scenario
 from .execute import connect, default_workers, run_dask, run_local
 from .stats import ensemble
-from .store import SetDirectory, atomic_write
+from .store import SetDirectory, atomic_write, npz_bytes
 
 FIGURES = ("mc_errors.png", "mc_nees.png", "mc_gap_yaw.png")
 
@@ -58,9 +57,7 @@ def run_set(s: Scenario, n_runs: int, out: Path, workers: int | None = None,
 def write_results(s: Scenario, store: SetDirectory, n_runs: int, command: str) -> dict:
     summary, fig = ensemble(s, store.records(), store.arrays, n_runs, command)
     out = store.out
-    buf = io.BytesIO()
-    np.savez(buf, **fig)
-    atomic_write(out / "montecarlo.npz", buf.getvalue())
+    atomic_write(out / "montecarlo.npz", npz_bytes(fig))
     if fig:
         draw_figures(out / "plots", s, summary, fig, command)
     atomic_write(out / "montecarlo.json",
@@ -90,9 +87,9 @@ def caption(s: Scenario, summary: dict, command: str) -> str:
 
 
 def draw_figures(plots: Path, s: Scenario, summary: dict, fig: dict, command: str) -> None:
-    import matplotlib.pyplot as plt
-
     from plots.montecarlo import plot_ensemble_errors, plot_ensemble_nees, plot_gap_end_yaw
+
+    from ..plotting import save_figure
     plots.mkdir(exist_ok=True)
     text = caption(s, summary, command)
     conv = s.montecarlo.converged_after_h
@@ -103,10 +100,7 @@ def draw_figures(plots: Path, s: Scenario, summary: dict, fig: dict, command: st
         plot_gap_end_yaw(fig, summary, text),
     )
     for name, f in zip(FIGURES, figures, strict=True):
-        buf = io.BytesIO()
-        f.savefig(buf, dpi=110, format="png")
-        plt.close(f)
-        atomic_write(plots / name, buf.getvalue())
+        save_figure(f, plots / name)
 
 
 def one_line(summary: dict) -> str:

@@ -50,7 +50,7 @@ def atomic_write(path: Path, data: bytes) -> None:
         raise
 
 
-def _npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     return buf.getvalue()
@@ -59,9 +59,9 @@ def _npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
 def save_case(stem: Path, outcome: dict) -> None:
     """``stem``.npz (and .full.npz), then ``stem``.json, the marker that it is done."""
     if outcome.get("arrays") is not None:
-        atomic_write(stem.with_suffix(".npz"), _npz_bytes(outcome["arrays"]))
+        atomic_write(stem.with_suffix(".npz"), npz_bytes(outcome["arrays"]))
     if outcome.get("full") is not None:
-        atomic_write(stem.with_suffix(".full.npz"), _npz_bytes(outcome["full"]))
+        atomic_write(stem.with_suffix(".full.npz"), npz_bytes(outcome["full"]))
     atomic_write(stem.with_suffix(".json"),
                  (json.dumps(outcome["record"], indent=1, allow_nan=False) + "\n").encode())
 
