@@ -22,11 +22,6 @@ from ..schema import Scenario
 from .schema import Normal, Uniform
 
 
-def case_seed_sequence(seed: int, case: int) -> np.random.SeedSequence:
-    """Case ``case``'s root: identical to ``SeedSequence(seed).spawn(case + 1)[case]``."""
-    return np.random.SeedSequence(seed, spawn_key=(case,))
-
-
 def key_rng(seed: int, case: int, key: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(
         seed, spawn_key=(case, DISPERSION_STREAM, zlib.crc32(key.encode()))))

@@ -19,7 +19,7 @@ from scipy import stats
 
 from scenarios import build
 from scenarios.loader import ScenarioError, load_scenario
-from scenarios.montecarlo.dispersions import case_seed_sequence, draw_case
+from scenarios.montecarlo.dispersions import draw_case
 from sim.ephemeris import parse_epoch
 
 from .mc_helpers import (
@@ -152,10 +152,11 @@ def test_case_draws_do_not_depend_on_other_keys_cases_or_order(stat_scenario, st
     # Drawn in another order, and far past the others: each case is its own.
     for k in (N_DRAWS - 1, 3, 0):
         assert draw_case(stat_scenario, k)[0] == stat_draws[k]
-    # Case k's root is the k-th child of the scenario seed whatever the number of cases.
+    # Case k's root, the spawn key (k,) its record stores, is the k-th child of the
+    # scenario seed whatever the number of cases.
     seed = stat_scenario.seed
     for k in (0, 5, 9):
-        state = case_seed_sequence(seed, k).generate_state(4)
+        state = np.random.SeedSequence(seed, spawn_key=(k,)).generate_state(4)
         for n in (k + 1, 10, 1000):
             assert np.array_equal(np.random.SeedSequence(seed).spawn(n)[k].generate_state(4),
                                   state)
