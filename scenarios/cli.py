@@ -1,7 +1,7 @@
 """The ``dynprop`` command line (DESIGN.md section 6).
 
-Exit status: 0 on success, 2 for bad input (one line naming the key or argument,
-no traceback, no directory written), 1 for an internal error (one line;
+Exit status: 0 on success, 2 for bad input (one line per problem, each naming the
+key, column or argument; no traceback, no directory written), 1 for an internal error (one line;
 ``DYNPROP_DEBUG=1`` shows the traceback), 130 when interrupted.
 """
 
@@ -297,7 +297,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return COMMANDS[args.command](args)
     except (InputError, RunDirError, ScenarioError, SchedulerError) as exc:
-        print(f"dynprop: error: {exc}", file=sys.stderr)
+        # One line per problem, each naming its key path, column or argument.
+        for line in str(exc).splitlines() or [""]:
+            print(f"dynprop: error: {line}", file=sys.stderr)
         return 2
     except OSError as exc:
         # Files the user named (or their directories) could not be read or written.

@@ -1,26 +1,33 @@
 """Load, override and validate scenarios; write them back fully resolved.
 
-Every failure is a ``ScenarioError`` with one line that names the key path (or
-the file) and the problem, which the CLI prints before exiting with status 2.
+Every failure is a ``ScenarioError`` holding every problem found, one line each,
+and each line names the key path (or the file) and, for a misspelt key, the
+closest valid key.  The CLI prints them before exiting with status 2.
 """
 
 from __future__ import annotations
 
+import difflib
 import re
+import typing
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from . import __version__
-from .montecarlo.schema import DISTRIBUTION_TAGS
+from .montecarlo.schema import DISTRIBUTION_TAGS, Normal, Uniform
 from .schema import Scenario
 
 
 class ScenarioError(ValueError):
-    """A bad scenario: the message is one line naming the key path."""
+    """A bad scenario: one line per problem, each naming its key path (or the file)."""
+
+    @property
+    def problems(self) -> list[str]:
+        return str(self).splitlines()
 
 
 class _Loader(yaml.SafeLoader):
@@ -126,30 +133,103 @@ def apply_override(raw: dict, assignment: str) -> None:
     node[keys[-1]] = _parse_yaml(text, f"--set {path}")
 
 
+MAX_PROBLEM_LINES = 10
+
+
 def _union_label(part) -> bool:
     return isinstance(part, str) and (part in DISTRIBUTION_TAGS or part == "float"
                                       or part.startswith("tuple["))
 
 
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The schema model that holds the key at ``loc`` (its parent), or None where
+    the keys are the user's own (the dispersion mapping)."""
+    model: Any = Scenario
+    parts = list(loc[:-1])
+    while parts:
+        part = parts.pop(0)
+        if part in DISTRIBUTION_TAGS:
+            model = {"normal": Normal, "uniform": Uniform}[part]
+            continue
+        if not (isinstance(model, type) and issubclass(model, BaseModel)) \
+                or part not in model.model_fields:
+            return None
+        model = model.model_fields[part].annotation
+        if typing.get_origin(model) is dict:
+            if not parts:
+                return None
+            parts.pop(0)  # the user's key (a dispersed key path)
+            model = None
+    return model if isinstance(model, type) and issubclass(model, BaseModel) else None
+
+
+def closest(word: str, candidates) -> str | None:
+    """The valid name a misspelt ``word`` most likely meant, if any is close.
+
+    difflib's ratio catches transpositions and small slips (``nmae`` → ``name``);
+    a key written without its unit suffix (``inertia`` → ``inertia_kgm2``) is
+    caught by its prefix even where the ratio is low."""
+    candidates = [str(c) for c in candidates]
+    match = difflib.get_close_matches(str(word), candidates, n=1, cutoff=0.6)
+    if match:
+        return match[0]
+    prefixed = [c for c in candidates if c.startswith(f"{word}_")]
+    return prefixed[0] if len(prefixed) == 1 else None
+
+
+def did_you_mean(word: str, candidates) -> str:
+    match = closest(word, candidates)
+    return f"; did you mean '{match}'?" if match else ""
+
+
+def problem_lines(exc: ValidationError) -> list[str]:
+    """One line per problem key, each starting with its key path; an unknown key
+    names the closest valid key at the same place.  A vector or matrix with several
+    bad elements is one problem: its first element is shown, with the count."""
+    lines: dict[str, list[str]] = {}
+    for error in exc.errors():
+        # Union labels in a dispersion's loc ("...normal.sigma.float") are not keys
+        # the user wrote; a union gives one error per alternative, keep the first.
+        loc = tuple(p for p in error["loc"] if not _union_label(p))
+        first_int = next((i for i, p in enumerate(loc) if isinstance(p, int)), len(loc))
+        where = ".".join(str(p) for p in loc[:first_int])
+        index = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc[first_int:])
+        msg = error["msg"].removeprefix("Value error, ")
+        if error["type"] == "extra_forbidden":
+            model = _model_at(error["loc"])
+            msg = "unknown key" + (did_you_mean(str(loc[-1]), model.model_fields)
+                                   if model is not None else "")
+        elif error["type"] == "missing":
+            msg = "missing value (wrong length)" if isinstance(error["loc"][-1], int) \
+                else "required key is missing"
+        if not where:
+            # Whole-scenario checks (the Monte Carlo keys) name their key paths
+            # themselves, one line each.
+            for line in msg.splitlines():
+                lines.setdefault(line if ": " in line else f"scenario: {line}", [])
+            continue
+        lines.setdefault(where, []).append(f"{msg} at {index}" if index else msg)
+    out = []
+    for where, msgs in lines.items():
+        if not msgs:
+            out.append(where)
+            continue
+        more = len(msgs) - 1
+        out.append(f"{where}: {msgs[0]}" + (f" (and {more} more in this value)" if more else ""))
+    return out
+
+
+def cap_lines(lines: list[str], limit: int = MAX_PROBLEM_LINES) -> list[str]:
+    """At most ``limit`` lines; the last says how many more were found."""
+    if len(lines) <= limit:
+        return lines
+    more = len(lines) - (limit - 1)
+    return lines[:limit - 1] + [f"... and {more} more problems"]
+
+
 def format_error(exc: ValidationError) -> str:
-    """One line: the first problem's key path and message (+ how many more)."""
-    errors = exc.errors()
-    first = errors[0]
-    # Union labels in a dispersion's loc ("...normal.sigma.float") are not keys the
-    # user wrote.
-    loc = ".".join(str(p) for p in first["loc"] if not _union_label(p))
-    msg = first["msg"].removeprefix("Value error, ")
-    if not loc:
-        # Whole-scenario checks (the Monte Carlo keys) name their key path themselves.
-        loc, _, msg = msg.partition(": ") if ": " in msg else ("scenario", "", msg)
-    if first["type"] == "extra_forbidden":
-        msg = "unknown key"
-    elif first["type"] == "missing":
-        msg = "missing value (wrong length)" if isinstance(first["loc"][-1], int) \
-            else "required key is missing"
-    more = f" (and {len(errors) - 1} more problem{'s' * (len(errors) > 2)})" \
-        if len(errors) > 1 else ""
-    return f"{loc}: {msg}{more}"
+    """Every problem, one line each (at most MAX_PROBLEM_LINES)."""
+    return "\n".join(cap_lines(problem_lines(exc)))
 
 
 def validate(raw: dict) -> Scenario:
@@ -160,10 +240,22 @@ def validate(raw: dict) -> Scenario:
 
 
 def load_scenario(source: str | Path, overrides: list[str] = ()) -> Scenario:
+    """The validated scenario with ``key.path=value`` overrides applied in order.
+    Every problem of the file and of the overrides is reported together."""
     raw, _ = read_raw(source)
+    problems: list[str] = []
     for assignment in overrides:
-        apply_override(raw, assignment)
-    return validate(raw)
+        try:
+            apply_override(raw, assignment)
+        except ScenarioError as exc:
+            problems += exc.problems
+    try:
+        scenario = validate(raw)
+    except ScenarioError as exc:
+        problems += exc.problems
+    if problems:
+        raise ScenarioError("\n".join(cap_lines(problems)))
+    return scenario
 
 
 def resolved_yaml(scenario: Scenario) -> str:

@@ -12,6 +12,7 @@ from estimator.transition import discretize
 
 from . import build
 from .csvio import BackgroundWriter, read_csv, write_csv
+from .loader import cap_lines, did_you_mean
 from .outputs import (
     comparison_arrays,
     estimate_columns,
@@ -96,8 +97,13 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background)
     return summary
 
 
+OPTIONAL_TELEMETRY = ("yaw_sigma_deg", "sun_head")
+
+
 def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
-    """A telemetry CSV with at least the contract columns; one-line errors otherwise."""
+    """A telemetry CSV with at least the contract columns.  Every problem found is
+    reported, one line each naming the column; a missing column names the file's
+    column it was most likely misspelt as."""
     path = Path(path)
     if not path.is_file():
         raise RunDirError(f"{path}: no such telemetry file")
@@ -105,34 +111,39 @@ def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
         cols = read_csv(path)
     except (ValueError, UnicodeDecodeError) as exc:
         raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
-    missing = [c for c in REQUIRED_TELEMETRY if c not in cols]
     n_wheels = len(build.yaw_factors(s))
-    missing += [f"wheel{i + 1}_rpm" for i in range(2, n_wheels) if f"wheel{i + 1}_rpm" not in cols]
-    if missing:
-        raise RunDirError(f"{path}: missing column(s) {', '.join(missing)}")
-    t = cols["t_s"]
-    if len(t) < 2:
-        raise RunDirError(f"{path}: needs at least two samples")
+    required = (*REQUIRED_TELEMETRY,
+                *(f"wheel{i + 1}_rpm" for i in range(2, n_wheels)))
+    unused = [c for c in cols if c not in required and c not in OPTIONAL_TELEMETRY]
+    problems = [f"{path}: missing column {name}{did_you_mean(name, unused)}"
+                for name in required if name not in cols]
+    t = cols.get("t_s")
+    if t is not None and len(t) < 2:
+        problems.append(f"{path}: needs at least two samples")
     for name in ("t_s", "roll_deg", *(f"wheel{i + 1}_rpm" for i in range(n_wheels))):
-        bad = ~np.isfinite(cols[name])
+        bad = ~np.isfinite(cols[name]) if name in cols else np.zeros(0, bool)
         if bad.any():
-            raise RunDirError(f"{path}: column {name} has a missing or non-numeric value in "
-                              f"row {int(np.argmax(bad)) + 2}")
-    present = np.isfinite(cols["yaw_deg"])
-    if "yaw_sigma_deg" in cols:
+            problems.append(f"{path}: column {name} has a missing or non-numeric value in "
+                            f"row {int(np.argmax(bad)) + 2}")
+    present = np.isfinite(cols["yaw_deg"]) if "yaw_deg" in cols else None
+    if "yaw_sigma_deg" in cols and present is not None:
         sig = cols["yaw_sigma_deg"][present]
         if not np.all(np.isfinite(sig) & (sig > 0)):
-            raise RunDirError(f"{path}: yaw_sigma_deg must be positive wherever yaw_deg is "
-                              "present")
+            problems.append(f"{path}: yaw_sigma_deg must be positive wherever yaw_deg is "
+                            "present")
     if "sun_head" in cols:
         head = cols["sun_head"][np.isfinite(cols["sun_head"])]
         if not np.all(np.isin(head, (0.0, 1.0, 2.0))):
-            raise RunDirError(f"{path}: sun_head must be 0 (dss), 1 (cass1) or 2 (cass2)")
-    steps = np.diff(t)
-    if not np.allclose(steps, s.sample_interval_s, rtol=1e-6, atol=1e-6):
-        k = int(np.argmax(~np.isclose(steps, s.sample_interval_s, rtol=1e-6, atol=1e-6)))
-        raise RunDirError(f"{path}: t_s must advance by the scenario's sample_interval_s "
-                          f"({s.sample_interval_s} s); row {k + 3} steps {steps[k]:g} s")
+            problems.append(f"{path}: sun_head must be 0 (dss), 1 (cass1) or 2 (cass2)")
+    if t is not None and len(t) >= 2 and np.all(np.isfinite(t)):
+        steps = np.diff(t)
+        off = ~np.isclose(steps, s.sample_interval_s, rtol=1e-6, atol=1e-6)
+        if off.any():
+            k = int(np.argmax(off))
+            problems.append(f"{path}: t_s must advance by the scenario's sample_interval_s "
+                            f"({s.sample_interval_s} s); row {k + 3} steps {steps[k]:g} s")
+    if problems:
+        raise RunDirError("\n".join(cap_lines(problems)))
     return cols
 
 

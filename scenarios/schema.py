@@ -8,6 +8,7 @@ generated from these definitions (``python -m scenarios.reference``).
 
 from __future__ import annotations
 
+import difflib
 from typing import Annotated, Literal
 
 import numpy as np
@@ -305,7 +306,7 @@ class Scenario(_Section):
     seed: int = Field(20260320, ge=0, description="root of every random stream")
     epoch_utc: str = Field("2026-03-20T12:00:00Z", description="ISO 8601 UTC start time; sets "
                            "the Sun and so the season (1950–2049)")
-    duration_s: float = Field(172800.0, ge=0, le=MAX_DURATION_S, description="length (s)")
+    duration_s: float = Field(172800.0, gt=0, le=MAX_DURATION_S, description="length (s)")
     sample_interval_s: float = Field(0.512, gt=0, le=1.024, description="telemetry, "
                                      "control and integration step; the sampled control "
                                      "loop goes unstable above ~2.2 s (s)")
@@ -332,9 +333,21 @@ class Scenario(_Section):
         return v
 
     @model_validator(mode="after")
-    def _dispersed_keys_exist(self):
+    def _whole_scenario_checks(self):
+        # Checks across keys; every problem is reported, one line each (the loader
+        # splits them), each naming its own key path.
+        problems = []
+        if self.duration_s < self.sample_interval_s:
+            # A run needs a step to propagate over; a shorter one writes one-row files.
+            problems.append(f"duration_s: {self.duration_s:g} s is shorter than one "
+                            f"sample_interval_s ({self.sample_interval_s:g} s)")
         for key, d in self.montecarlo.dispersions.items():
-            check_dispersion(key, leaf_value(self, key), d)
+            try:
+                check_dispersion(key, leaf_value(self, key), d)
+            except ValueError as exc:
+                problems.append(str(exc))
+        if problems:
+            raise ValueError("\n".join(problems))
         return self
 
 
@@ -343,8 +356,22 @@ def leaf_value(scenario: BaseModel, key: str):
     node = scenario
     for part in key.split("."):
         if not isinstance(node, BaseModel) or part not in type(node).model_fields:
-            raise ValueError(f"montecarlo.dispersions.{key}: no such scenario key")
+            match = difflib.get_close_matches(key, leaf_paths(type(scenario)), n=1)
+            hint = f"; did you mean '{match[0]}'?" if match else ""
+            raise ValueError(f"montecarlo.dispersions.{key}: no such scenario key{hint}")
         node = getattr(node, part)
     if isinstance(node, BaseModel):
         raise ValueError(f"montecarlo.dispersions.{key}: is a section, not a value")
     return node
+
+
+def leaf_paths(model: type[BaseModel], prefix: str = "") -> list[str]:
+    """Every dotted key path of ``model`` that holds a value (not a section)."""
+    paths = []
+    for name, field in model.model_fields.items():
+        sub = field.annotation
+        if isinstance(sub, type) and issubclass(sub, BaseModel):
+            paths += leaf_paths(sub, f"{prefix}{name}.")
+        else:
+            paths.append(f"{prefix}{name}")
+    return paths

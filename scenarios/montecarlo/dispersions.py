@@ -100,4 +100,5 @@ def draw_case(s: Scenario, case: int) -> tuple[dict, Scenario]:
     try:
         return values, validate(raw)
     except ScenarioError as exc:
-        raise UnphysicalDraw(str(exc), values) from None
+        # One line per case in the set's records and messages.
+        raise UnphysicalDraw("; ".join(exc.problems), values) from None
