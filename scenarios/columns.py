@@ -41,26 +41,54 @@ def truth_columns(result, sun_visible: np.ndarray) -> dict[str, np.ndarray]:
     return cols
 
 
-def telemetry_columns(tel, head_names: tuple[str, ...]) -> dict[str, np.ndarray]:
+def decimals_of(quantum: float, most: int = 12) -> int | None:
+    """Decimal places of a quantum written in decimal (0.0163 → 4, 0.125 → 3), or
+    None if it has no short decimal form (then readings are left as they are)."""
+    for d in range(most + 1):
+        if round(quantum, d) == quantum:
+            return d
+    return None
+
+
+def as_decimal_reading(values: np.ndarray, quantum: float) -> np.ndarray:
+    """Quantised readings as the nearest double to their decimal value.
+
+    The sensor model gives k·q in rad or rad/s; converted back to deg or rpm the
+    product is a few ulps off the decimal a ground system prints (5485.096699999999
+    for 336 519 × 0.0163 rpm).  Re-rounding to the quantum's decimal places moves
+    each reading by those ulps only (never by a count: |error| ≪ q/2) and makes the
+    file's shortest round-trip text the reading itself, 5485.0967."""
+    d = decimals_of(quantum)
+    if d is None:
+        return values
+    with np.errstate(invalid="ignore"):
+        return np.round(np.round(values / quantum) * quantum, d)
+
+
+def telemetry_columns(tel, suite) -> dict[str, np.ndarray]:
     """What a ground system receives, plus its own yaw solution.
 
     ``yaw_deg`` is the ground yaw (empty when no Sun sensor sees the Sun or the Sun
     is too near the yaw axis); ``yaw_sigma_deg`` its a-priori 1σ from the sensor and
     the geometry; ``sun_head`` the index of the head it came from (0 = first head);
     ``<head>_{alpha,beta}_deg`` the raw quantised Sun-sensor angles (empty when that
-    head does not see the Sun).
+    head does not see the Sun).  Quantised readings are their decimal values
+    (``as_decimal_reading``); the run's filter reads these very columns.
     """
+    earth_q, tach_q = suite.earth.quantum_deg, suite.tachometer.quantum_rpm
     cols = {
         "t_s": tel.t_s,
-        "roll_deg": tel.roll_rad * RAD2DEG,
-        "pitch_deg": tel.pitch_rad * RAD2DEG,
+        "roll_deg": as_decimal_reading(tel.roll_rad * RAD2DEG, earth_q),
+        "pitch_deg": as_decimal_reading(tel.pitch_rad * RAD2DEG, earth_q),
         "yaw_deg": tel.yaw_rad * RAD2DEG,
     }
     for i in range(tel.wheel_speeds_radps.shape[1]):
-        cols[f"wheel{i + 1}_rpm"] = tel.wheel_speeds_radps[:, i] * RADPS2RPM
+        cols[f"wheel{i + 1}_rpm"] = as_decimal_reading(
+            tel.wheel_speeds_radps[:, i] * RADPS2RPM, tach_q)
     cols["yaw_sigma_deg"] = tel.yaw_sigma_rad * RAD2DEG
     cols["sun_head"] = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
-    for k, name in enumerate(head_names):
-        cols[f"{name}_alpha_deg"] = tel.sun.alpha_rad[:, k] * RAD2DEG
-        cols[f"{name}_beta_deg"] = tel.sun.beta_rad[:, k] * RAD2DEG
+    for k, head in enumerate(suite.sun_heads):
+        for angle, values in (("alpha", tel.sun.alpha_rad), ("beta", tel.sun.beta_rad)):
+            cols[f"{head.name}_{angle}_deg"] = as_decimal_reading(values[:, k] * RAD2DEG,
+                                                                  head.quantum_deg)
     return cols

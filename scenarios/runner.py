@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.sensors import SensorSuite
 from sim.telemetry import Telemetry, make_telemetry
 from sim.truth import TruthResult, simulate_truth
 
@@ -26,7 +27,11 @@ class Simulation:
     scenario: Scenario
     truth: TruthResult
     telemetry: Telemetry
-    head_names: tuple[str, ...]
+    suite: SensorSuite
+
+    @property
+    def head_names(self) -> tuple[str, ...]:
+        return tuple(h.name for h in self.suite.sun_heads)
 
 
 def simulate(scenario: Scenario, run: int = 0, model=None) -> Simulation:
@@ -40,21 +45,22 @@ def simulate(scenario: Scenario, run: int = 0, model=None) -> Simulation:
         build.build_initial(scenario), build.epoch(scenario), scenario.duration_s,
         scenario.sample_interval_s, rng=rngs["ripple"], model=model)
     tel = make_telemetry(truth, suite, rngs, scenario.sensors.sun.min_sun_separation_deg)
-    return Simulation(scenario, truth, tel, tuple(h.name for h in suite.sun_heads))
+    return Simulation(scenario, truth, tel, suite)
 
 
 def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = None,
                      truth_writer=None, scenario: Scenario | None = None
                      ) -> dict[str, np.ndarray]:
     """scenario.yaml (resolved), truth.csv and telemetry.csv into ``stage``; returns
-    the telemetry columns exactly as written (17 digits: a re-read gives the same
-    doubles, so `dynprop estimate` on the file reproduces a run's filter).  With
+    the telemetry columns exactly as written (shortest round-trip text: a re-read
+    gives the same doubles, so `dynprop estimate` on the file reproduces a run's
+    filter).  With
     ``truth_writer`` (a callable taking path and columns) truth.csv is handed off.
     ``scenario`` is what scenario.yaml records, if not the one simulated (a Monte
     Carlo case records its nominal scenario)."""
     (stage / "scenario.yaml").write_text(resolved_yaml(scenario or sim.scenario))
     truth = truth_columns(sim.truth, sim.telemetry.sun_visible)
-    tel = telemetry_columns(sim.telemetry, sim.head_names)
+    tel = telemetry_columns(sim.telemetry, sim.suite)
     if truth_writer is not None:
         truth_writer(stage / "truth.csv", truth)
         write_csv(stage / "telemetry.csv", tel, exact=True)

@@ -122,7 +122,7 @@ def run_case(s: Scenario, case: int, keep_full: bool = False) -> dict:
         dispersed, flying = draw_case(s, case)
         sim = simulate(flying, run=case)
         # The filter sees the telemetry exactly as `dynprop run` writes it.
-        cols = telemetry_columns(sim.telemetry, sim.head_names)
+        cols = telemetry_columns(sim.telemetry, sim.suite)
         present = np.isfinite(cols["yaw_deg"])
         _, _, rows = case_rows(s, len(present), present)
         runs = run_scenario(s, sim, cols, run=case, smooth=False, truth_scenario=flying,
