@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from plots.truth import plot_truth
 
 from .csvio import read_csv
 from .rundir import RunDirError
+from .workers import worker_pool
 
 # Columns of the comparison arrays: the model's state indices (estimator.model).
 COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
@@ -48,7 +48,7 @@ def _draw_all(jobs) -> list[Path]:
     """Draw and save figures, two at a time on two cores (rendering dominates)."""
     if len(jobs) < 2 or (os.cpu_count() or 1) < 2:
         return [_draw(j) for j in jobs]
-    with ProcessPoolExecutor(2, mp_context=get_context("fork")) as pool:
+    with worker_pool(2, get_context("fork")) as pool:
         return list(pool.map(_draw, jobs))
 
 

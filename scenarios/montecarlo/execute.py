@@ -13,11 +13,12 @@ import multiprocessing
 import os
 import sys
 from collections.abc import Callable, Iterable
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 
 from ..loader import resolved_yaml
 from ..schema import Scenario
+from ..workers import worker_pool
 from . import SchedulerError
 from .case import failed, run_case
 
@@ -60,7 +61,7 @@ def run_local(s: Scenario, cases: list[int], keep: Iterable[int], workers: int,
     bar = _progress(total or len(todo), done_before, "montecarlo")
     try:
         while todo:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=_context()) as pool:
+            with worker_pool(workers, _context()) as pool:
                 running = {}
                 broken = False
                 while (todo or running) and not broken:

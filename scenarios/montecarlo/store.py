@@ -137,6 +137,13 @@ class SetDirectory:
             return {k: data[k] for k in data.files}
 
     def clean_temporaries(self) -> None:
-        """Remove what a killed set may have left half written."""
-        for path in self.cases_dir.glob(".case-*"):
-            path.unlink(missing_ok=True)
+        """Remove what a killed set may have left half written: the temporaries of
+        ``atomic_write`` (``.NAME.XXXXXXXX``) for case files and the set's own files,
+        and half-drawn figures (``plots/.NAME.png.tmp``)."""
+        leftovers = [*self.cases_dir.glob(".case-*")]
+        for name in (SCENARIO_FILE, "montecarlo.json", "montecarlo.npz"):
+            leftovers += self.out.glob(f".{name}.*")
+        leftovers += (self.out / "plots").glob(".*.png.tmp")
+        for path in leftovers:
+            if path.is_file():
+                path.unlink(missing_ok=True)
