@@ -13,9 +13,17 @@ centred dipole with
 - north geomagnetic pole at (90 deg - acos(-g10/B0), atan2(-h11, -g11)) = (80.79 N, 72.76 W).
 
 Those derived values are the defaults below, so moment and pole stay mutually consistent. The
-often-quoted 7.72e22 A m^2 corresponds to IGRF epoch 2015 (0.4 % stronger); the dipole weakens
-by about 0.04 % per year, well below the model error of a pure dipole at GEO, where the
-higher IGRF degrees contribute ~1-2 % and magnetospheric currents tens of nT.
+often-quoted 7.72e22 A m^2 corresponds to IGRF epoch 2015 (0.4 % stronger).
+
+What the dipole leaves out, measured against IGRF-14 to degree 13 at r = 42 164 km on the
+equator (epochs 2025.0-2026.9; ppigrf 2.1's IGRF14.shc):
+
+- the higher degrees (2-13) add 3.3 % of the field at 75 deg W (0.9 deg in direction) and up
+  to 5.9 % (2.7 deg in direction) around the GEO belt, the largest near 19 deg W;
+- the dipole itself weakens by 0.054 % per year (B0 = 29 733 nT at 2025.0, 29 653 nT at
+  2030.0 from the secular variation), 0.3 % over the 2025-2030 model span;
+- magnetospheric currents, which no internal-field model holds, add tens of nT at GEO
+  against the dipole's 103-106 nT, varying with local time and activity.
 """
 
 from __future__ import annotations
@@ -39,8 +47,6 @@ POLE_LAT_DEG = 90.0 - float(np.rad2deg(np.arccos(-IGRF14_2025_G10_T / _B0_T)))
 """North geomagnetic pole latitude [deg], about 80.79."""
 POLE_LON_DEG = float(np.rad2deg(np.arctan2(-IGRF14_2025_H11_T, -IGRF14_2025_G11_T)))
 """North geomagnetic pole east longitude [deg], about -72.76."""
-
-"""Geostationary orbit radius [m]."""
 
 
 def dipole_moment_ecef(
