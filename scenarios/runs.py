@@ -12,7 +12,7 @@ from estimator.transition import discretize
 
 from . import build
 from .csvio import BackgroundWriter, read_csv, write_csv
-from .loader import cap_lines, did_you_mean
+from .loader import cap_lines, closest
 from .outputs import (
     comparison_arrays,
     estimate_columns,
@@ -115,8 +115,15 @@ def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
     required = (*REQUIRED_TELEMETRY,
                 *(f"wheel{i + 1}_rpm" for i in range(2, n_wheels)))
     unused = [c for c in cols if c not in required and c not in OPTIONAL_TELEMETRY]
-    problems = [f"{path}: missing column {name}{did_you_mean(name, unused)}"
-                for name in required if name not in cols]
+    problems = []
+    for name in required:
+        if name in cols:
+            continue
+        # A file column that looks like the missing one is most likely it, misspelt:
+        # name the file's column and suggest the valid name, as for a scenario key.
+        typo = closest(name, unused)
+        problems.append(f"{path}: unknown column {typo}; did you mean '{name}'?" if typo
+                        else f"{path}: missing column {name}")
     t = cols.get("t_s")
     if t is not None and len(t) < 2:
         problems.append(f"{path}: needs at least two samples")

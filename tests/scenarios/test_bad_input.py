@@ -68,7 +68,7 @@ def test_two_bad_values_are_both_shown(capsys, tmp_path):
     assert lines[1].startswith("sample_interval_s: ") and "greater than 0" in lines[1]
 
 
-def test_a_misspelt_telemetry_column_is_named_with_the_file_column_it_meant(
+def test_a_misspelt_telemetry_column_is_named_with_the_column_it_meant(
         capsys, tmp_path):
     t = np.arange(10) * 0.512
     path = tmp_path / "telemetry.csv"
@@ -79,8 +79,20 @@ def test_a_misspelt_telemetry_column_is_named_with_the_file_column_it_meant(
                               "goes_next_equinox", "--out", str(out))
     assert rc == 2 and stdout == "" and not out.exists()
     lines = error_lines(err)
-    assert lines == [f"{path}: missing column roll_deg; did you mean 'rol_deg'?",
-                     f"{path}: missing column wheel2_rpm; did you mean 'wheel_2rpm'?"]
+    assert lines == [f"{path}: unknown column rol_deg; did you mean 'roll_deg'?",
+                     f"{path}: unknown column wheel_2rpm; did you mean 'wheel2_rpm'?"]
+
+
+def test_a_missing_telemetry_column_with_no_look_alike_is_named(capsys, tmp_path):
+    t = np.arange(10) * 0.512
+    path = tmp_path / "telemetry.csv"
+    write_csv(path, {"t_s": t, "roll_deg": 0 * t, "yaw_deg": 0 * t, "wheel1_rpm": 5485 + 0 * t,
+                     "wheel2_rpm": 5485 + 0 * t, "comment": 0 * t}, exact=True)
+    out = tmp_path / "est"
+    rc, _, err = run_cli(capsys, "estimate", str(path), "--scenario", "goes_next_equinox",
+                         "--out", str(out))
+    assert rc == 2 and not out.exists()
+    assert error_lines(err) == [f"{path}: missing column pitch_deg"]
 
 
 def test_every_problem_in_set_overrides_is_shown_with_its_fix(capsys, tmp_path):
