@@ -1,4 +1,4 @@
-"""Run directories that are written whole or not at all (docs/outputs.md).
+"""Run directories that are written whole or not at all.
 
 A run is written into a hidden staging directory beside ``--out`` and renamed at
 the end.  Its name carries the owner, ``.NAME.stage-HOST-PID-XXXXXXXX``, so that a
