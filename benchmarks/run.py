@@ -65,7 +65,41 @@ def truth_day(model: TruthModel):
                           rng=rng, model=model)
 
 
+def run_figures_2day_s() -> float:
+    """The four `dynprop run` figures of the default two-day run, drawn and saved
+    (two at a time, as `dynprop run` does), from its comparison.npz and telemetry."""
+    from scenarios.plotting import plot_run_figures
+    exe = str(Path(sys.executable).with_name("dynprop"))
+    with tempfile.TemporaryDirectory() as tmp:
+        run = Path(tmp) / "run"
+        subprocess.run([exe, "run", "goes_next_equinox", "--out", str(run)], check=True,
+                       capture_output=True)
+        return median_time(lambda: plot_run_figures(run), repeats=3)
+
+
+def discretize_ms() -> float:
+    """Φ, Γ and Q_d of the paper's model at 0.512 s (Eqs. 15–23, 31–32), the best of
+    200 calls: the filter is rebuilt from these for every run and Monte Carlo case."""
+    from estimator.transition import discretize
+    from scenarios.build import estimator_model
+    params, noise = estimator_model(load_scenario("goes_next_equinox"))
+    discretize(params, noise, 0.512)
+    times = []
+    for _ in range(200):
+        start = time.perf_counter()
+        discretize(params, noise, 0.512)
+        times.append(time.perf_counter() - start)
+    return 1e3 * min(times)
+
+
 def main() -> None:
+    only = sys.argv[1:]
+    if only:
+        # `python benchmarks/run.py discretize_ms run_figures_2day_s`: just those.
+        for name in only:
+            report(name, globals()[name](), "ms" if name.endswith("_ms") else "s")
+        return
+    report("discretize_ms", discretize_ms(), "ms")
     with tempfile.TemporaryDirectory() as cache:
         os.environ["DYNPROP_CACHE_DIR"] = cache
         start = time.perf_counter()
@@ -99,6 +133,7 @@ def main() -> None:
     report("filter_s_per_day", median_time(lambda: kalman_filter(meas, disc, x0, P0),
                                            repeats=5), "s")
     report("run_2day_wall_s", cli_wall_s("run", "goes_next_equinox"), "s")
+    report("run_figures_2day_s", run_figures_2day_s(), "s")
     k = 5000  # the plain-numpy loop, for comparison, scaled to a day
     part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,
                         1.5e-7)

@@ -1,8 +1,9 @@
-"""Run figures: realistic sizes (2 days at 0.512 s), units on axes, speed, inputs intact."""
+"""Run figures: realistic sizes (2 days at 0.512 s), units on axes, inputs intact.
+
+How long drawing takes is measured by `make bench` (benchmarks/run.py), not here:
+a wall-clock limit flakes on shared cores."""
 
 from __future__ import annotations
-
-import time
 
 import matplotlib
 
@@ -116,20 +117,20 @@ UNITS = {"errors": ("deg", "N m s"), "torques": ("N m",), "consistency": (),
 
 @pytest.mark.parametrize("name", ["errors", "torques", "consistency", "telemetry"])
 def test_figure(run, name, tmp_path):
+    """Each figure draws, labels its axes with units and leaves its inputs intact.
+    Identity is the requirement for the inputs: drawing must not change a bit of
+    the caller's arrays."""
     before = {p: a.copy() for p, a in _arrays(run)}
     for _, a in _arrays(run):
         a.flags.writeable = False          # any in-place write raises
     try:
-        t0 = time.perf_counter()
         fig = figure_calls(run)[name]()
         out = tmp_path / f"{name}.png"
         fig.savefig(out, dpi=120)
-        elapsed = time.perf_counter() - t0
     finally:
         for _, a in _arrays(run):
             a.flags.writeable = True
     try:
-        assert elapsed < 3.0, f"{name}: {elapsed:.2f} s"
         assert out.stat().st_size > 50_000
         assert TITLE in fig._suptitle.get_text()
         axes = [ax for ax in fig.axes if ax.get_visible()]
@@ -213,6 +214,8 @@ def test_envelope_visible(run):
 
 
 def test_minmax_keeps_extremes_and_inputs():
+    """Identity is the requirement: min/max decimation selects samples, so the
+    extremes it keeps are the input's values exactly, and the input is unchanged."""
     y = np.sin(np.linspace(0, 50, 100_000))
     y[12_345] = 7.0
     y[54_321] = np.nan
@@ -229,5 +232,6 @@ def test_running_mean_nan_aware():
     y = np.ones(1000)
     y[100:700] = np.nan
     m = rf._running_mean(y, 50)
+    # Sums of ones are whole numbers, exact in floating point, and n/n is 1 exactly.
     assert np.all(m[:70] == 1.0)
     assert np.all(np.isnan(m[200:600]))
