@@ -1,4 +1,5 @@
-"""Shared helpers of the Monte Carlo tests."""
+"""Shared helpers of the Monte Carlo tests, and the Sun-gap prediction that the run
+and Monte Carlo tests check the written Sun gaps against."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import json
 import math
 import re
 import sys
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -111,3 +113,69 @@ def binomial_tol(p: float, n: int, k: float = 4.0) -> float:
     return k * math.sqrt(p * (1 - p) / n)
 
 
+
+
+# --------------------------------------------------------------------------- Sun gaps
+
+
+def sun_hour_angle_deg(epoch_utc: str, t_s, longitude_east_deg: float):
+    """The true Sun's hour angle at the sub-satellite meridian (deg, (−180, 180], 0 at
+    local noon, +90 at dusk) and its declination (deg), from first principles and
+    nothing of dynprop: the equation of time E of Meeus, *Astronomical Algorithms*
+    (2nd ed. 1998), Eq. 28.3 (Smart), with the solar coordinates of his Ch. 25 (low
+    accuracy: E within a few seconds of time, δ within 0.01°).  Apparent solar time
+    is UTC + λ/15° h + E.  GEO parallax (0.016°), nutation and UT1 − UTC (< 1 s)
+    are left out: each moves an edge by seconds."""
+    epoch = datetime.fromisoformat(epoch_utc.replace("Z", "+00:00")).astimezone(UTC)
+    t_s = np.asarray(t_s, dtype=float)
+    days = (epoch - datetime(2000, 1, 1, 12, tzinfo=UTC)) / timedelta(days=1) + t_s / 86400
+    T = days / 36525.0                                          # Julian centuries of TT≈UTC
+    L0 = np.radians(280.46646 + 36000.76983 * T + 0.0003032 * T**2)   # mean longitude
+    M = np.radians(357.52911 + 35999.05029 * T - 0.0001537 * T**2)    # mean anomaly
+    e = 0.016708634 - 0.000042037 * T - 0.0000001267 * T**2           # eccentricity
+    eps = np.radians(23.0 + 26 / 60 + (21.448 - 46.8150 * T) / 3600)  # mean obliquity
+    y = np.tan(eps / 2) ** 2
+    eot = (y * np.sin(2 * L0) - 2 * e * np.sin(M) + 4 * e * y * np.sin(M) * np.cos(2 * L0)
+           - 0.5 * y**2 * np.sin(4 * L0) - 1.25 * e**2 * np.sin(2 * M))   # rad
+    centre = np.radians((1.914602 - 0.004817 * T) * np.sin(M)
+                        + (0.019993 - 0.000101 * T) * np.sin(2 * M) + 0.000289 * np.sin(3 * M))
+    declination = np.degrees(np.arcsin(np.sin(eps) * np.sin(L0 + centre)))
+    midnight = epoch.replace(hour=0, minute=0, second=0, microsecond=0)
+    utc_h = (epoch - midnight) / timedelta(hours=1) + t_s / 3600
+    solar_h = utc_h + longitude_east_deg / 15 + np.degrees(eot) / 15
+    return (15 * (solar_h - 12) + 180) % 360 - 180, declination
+
+
+def predicted_sun_gaps_h(scenario, epoch_utc: str | None = None) -> list[tuple[float, float]]:
+    """Start and end (h into the run) of the yaw outages of at least
+    ``estimator.sun_gap_min_h`` that the Sun-sensor geometry alone predicts, for a
+    spacecraft on its nominal (zero) attitude.
+
+    With the body on the orbit frame the Sun at hour angle H and declination δ is
+    (−cos δ sin H, ·, −cos δ cos H) in body x, z: a head with boresight at hour angle
+    θ_b sees it at in-plane angle α = H − θ_b and out-of-plane angle
+    β = atan(tan δ / cos α); yaw needs α and β within the head's field of view, and
+    the Sun at least ``min_sun_separation_deg`` from the yaw axis (cos of that angle:
+    cos δ |cos H|).  Eclipses fall inside the night gap at GEO.  The attitude
+    (hundredths of a degree) moves the edges by seconds: 0.01° is 2.4 s of hour angle.
+    """
+    sun = scenario.sensors.sun
+    dt = scenario.sample_interval_s
+    # A 1 s grid, offset by half a second so no point lands on an edge.
+    t = np.arange(0.5, scenario.duration_s, 1.0)
+    H, dec = sun_hour_angle_deg(epoch_utc or scenario.epoch_utc, t,
+                                scenario.orbit.longitude_deg)
+    seen = np.zeros(t.size, dtype=bool)
+    for head in (sun.dss, sun.cass1, sun.cass2):
+        alpha = (H - head.boresight_hour_angle_deg + 180) % 360 - 180
+        beta = np.degrees(np.arctan(np.tan(np.radians(dec)) / np.cos(np.radians(alpha))))
+        seen |= ((np.abs(alpha) <= head.fov_in_plane_deg) & (np.abs(alpha) < 90)
+                 & (np.abs(beta) <= head.fov_out_of_plane_deg))
+    from_yaw_axis = np.degrees(np.arccos(np.cos(np.radians(dec)) * np.abs(np.cos(np.radians(H)))))
+    seen &= from_yaw_axis >= sun.min_sun_separation_deg
+    edges = np.flatnonzero(np.diff(np.r_[1, seen.astype(int), 1]))
+    # A missing sample is one whose time has no yaw: grid times ± 0.5 s.
+    gaps = [(max(t[a] - 0.5, 0.0), min(t[b - 1] + 0.5, scenario.duration_s))
+            for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return [(a / 3600, b / 3600) for a, b in gaps
+            if b - a >= scenario.estimator.sun_gap_min_h * 3600 - dt]

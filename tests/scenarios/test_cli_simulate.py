@@ -72,6 +72,8 @@ def test_truth_csv_has_the_design_columns_and_one_row_per_sample(run60):
     truth = read_csv(run60 / "truth.csv")
     n = math.floor(60 / DT) + 1
     assert len(truth["t_s"]) == n == 118
+    # %.10g of k·0.512 s (at most 5 significant digits here) reads back to the double
+    # k·0.512 up to its last bit: 1e-9 s absolute is 1e-11 of a minute.
     np.testing.assert_allclose(truth["t_s"], np.arange(n) * DT, rtol=0, atol=1e-9)
     for name in names:
         assert np.all(np.isfinite(truth[name])), f"truth column {name} has missing values"
@@ -86,6 +88,7 @@ def test_telemetry_csv_has_the_design_columns(run60):
     assert names[:len(TELEMETRY_COLUMNS)] == list(TELEMETRY_COLUMNS)
     tel = read_csv(run60 / "telemetry.csv")
     assert len(tel["t_s"]) == math.floor(60 / DT) + 1
+    # Exact: both files hold the decimal k·0.512, which both formats write in full.
     np.testing.assert_array_equal(tel["t_s"], read_csv(run60 / "truth.csv")["t_s"])
     # Earth-sensor angles are quantised to 0.01°
     np.testing.assert_allclose(tel["roll_deg"] / 0.01, np.round(tel["roll_deg"] / 0.01),
@@ -121,6 +124,9 @@ def test_scenario_yaml_is_the_resolved_scenario(run60):
 
 
 def test_torque_free_run_has_no_torques(tmp_path):
+    """Exact zeros are the requirement: each torque is switched off by a coefficient
+    of 0.0 (gravity gradient, solar, magnetic), a zero command (control) or a zero
+    input (wheel input, ripple), so it is 0 (or −0) in any arithmetic."""
     out = tmp_path / "run"
     assert simulate(out, scenario="torque_free") == 0
     truth = read_csv(out / "truth.csv")
@@ -133,6 +139,7 @@ def test_torque_free_run_has_no_torques(tmp_path):
 
 
 def test_same_seed_gives_byte_identical_files(tmp_path, run60):
+    """Identity is the requirement here: a rerun on the same machine."""
     again = tmp_path / "again"
     assert simulate(again) == 0
     for name in ("truth.csv", "telemetry.csv"):
@@ -147,6 +154,8 @@ def test_different_seed_gives_different_telemetry(tmp_path, run60):
 
 
 def test_changing_one_sensor_leaves_the_other_sensors_noise_alone(tmp_path, run60):
+    """Identity is the requirement here: each sensor draws from its own stream, so
+    another sensor's setting must not change a bit of the others' readings."""
     other = tmp_path / "earth"
     assert simulate(other, "--set", "sensors.earth.noise_deg=0.02") == 0
     base, changed = run60 / "telemetry.csv", other / "telemetry.csv"
@@ -161,6 +170,7 @@ def test_changing_one_sensor_leaves_the_other_sensors_noise_alone(tmp_path, run6
 
 
 def test_changing_the_tachometer_leaves_the_earth_sensor_alone(tmp_path, run60):
+    """Identity is the requirement here, as for the Earth sensor above."""
     other = tmp_path / "tach"
     assert simulate(other, "--set", "sensors.tachometer.noise_3sigma_rpm=0.2") == 0
     base, changed = run60 / "telemetry.csv", other / "telemetry.csv"
@@ -350,14 +360,30 @@ def test_internal_error_exits_1_with_one_line(tmp_path, monkeypatch, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_valid_scenario_never_writes_non_finite_truth(tmp_path, capsys):
+# Valid, and as far from the nominal as the schema allows: roll at its −90° limit
+# (the 3-1-2 singularity), yaw and pitch on ±180°, and a 2°/s tumble about x and z.
+STRESS_START = ("initial_state={yaw_deg: -180, roll_deg: -89.99, pitch_deg: 180, "
+                "rate_wrt_orbit_degps: [2.0, 0.0, -2.0]}")
+
+
+def test_a_valid_stress_scenario_writes_finite_truth(tmp_path, capsys):
+    """A scenario the schema accepts must run (exit 0) and write finite numbers, even
+    at the edge of every attitude range and with a tumble; the wheels (no speed limit
+    in the model) and the Sun sensors see it all."""
     out = tmp_path / "run"
-    rc = simulate(out, "--set", "sample_interval_s=60", duration="1200")
-    if rc == 0:
-        truth = read_csv(out / "truth.csv")
-        assert all(np.all(np.isfinite(v)) for v in truth.values())
-    else:
-        assert rc in (1, 2) and not out.exists()
+    assert simulate(out, "--set", STRESS_START, duration="1200") == 0, capsys.readouterr().err
+    truth = read_csv(out / "truth.csv")
+    for name, values in truth.items():
+        assert np.all(np.isfinite(values)), name
+    # The run really goes where it should: through the singular roll and the ±180° wrap,
+    # with the Sun both in and out of the heads' fields of view.
+    assert np.abs(truth["roll_deg"]).max() >= 89.98
+    assert np.ptp(truth["yaw_deg"]) > 180 and np.ptp(truth["pitch_deg"]) > 180
+    assert set(np.unique(truth["sun_visible"])) == {0.0, 1.0}
+    tel = read_csv(out / "telemetry.csv")
+    for name in ("t_s", "roll_deg", "pitch_deg", "wheel1_rpm", "wheel2_rpm"):
+        assert np.all(np.isfinite(tel[name])), name
+    assert np.isfinite(tel["yaw_deg"]).any()       # the ground yaw was solved at times
 
 
 # --------------------------------------------------------------------------- other commands
