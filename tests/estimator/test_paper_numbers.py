@@ -4,6 +4,10 @@ Each test computes a derived number from the paper's *inputs* and compares it
 with the *printed* value at the precision printed (``sig`` rounds to the
 printed number of significant figures).  Numbers that do not reproduce are
 strict xfails whose reason carries the evidence (docs/paper-errata.md).
+
+Comparing rounded values with ``==`` is safe here: every computed value lies at least
+1.4e-6 (relative) from a rounding boundary of the printed precision (the closest is
+I = 3412.54), ten orders of magnitude more than its rounding error.
 """
 
 import math
@@ -68,6 +72,7 @@ def test_eq1_pitch_bias():
 
 
 def test_eq2_yaw_momentum_is_zero_at_nominal_speeds():
+    """Exactly zero is the requirement: ω1 − ω2 of equal speeds is 0 in any arithmetic."""
     assert yaw_momentum_Nms(I_W, SPEED, SPEED, CANT) == 0.0
 
 
@@ -153,6 +158,7 @@ def test_eq48_tach_term_is_negligible():
     """R_k = R_roll + 2(I_w sin 1.656°/H)² R_tach ≈ R_roll: the tach term is 5e-7 of it."""
     Rk = combined_variance(H(), SENSORS)
     assert Rk / roll_variance(SENSORS) - 1 < 1e-6
+    # the same product in another order: a few roundings (measured 0)
     assert h_variance(SENSORS) / H() ** 2 == pytest.approx(
         2 * (I_W * math.sin(CANT) / H()) ** 2 * tach_variance(SENSORS), rel=1e-12)
     assert sig(Rk, 2) == 3.3e-8

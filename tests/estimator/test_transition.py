@@ -7,7 +7,6 @@ Parameter sets: GOES-Next (H < 0), the same with H > 0, and two made-up ones
 (ω_n/ω0 = −30 and +3), so nothing is tuned to one case.
 """
 
-import time
 from fractions import Fraction
 from functools import cache
 
@@ -43,7 +42,7 @@ NOISE = ProcessNoise(q_x=5.4e-7, q_z=4e-7, q_w=5e-10, q_px=3e-18, q_pz=2e-18, q_
                      q_cz=1e-18)
 _L = np.random.default_rng(20260321).standard_normal((9, 9))
 Q_DENSE = _L @ _L.T   # couples every state, so every G_k Q G_lᵀ term is exercised
-TOL = 1e-10
+EPS = np.finfo(float).eps
 
 
 def rel(a, b) -> float:
@@ -51,15 +50,31 @@ def rel(a, b) -> float:
     return float(np.abs(a - b).max() / np.abs(b).max())
 
 
+def expm_tol(M: np.ndarray, tau: float) -> float:
+    """Tolerance (max-norm relative, as ``rel``) against a float64 reference from
+    ``scipy.linalg.expm(M τ)``: M = F for Φ, [[F, I], [0, 0]] for Γ, Van Loan's
+    [[−F, Q], [0, Fᵀ]] for Q_d.  Scaling and squaring leaves that reference an error
+    growing as eps‖Mτ‖ (and the float phase ω_n τ of either side carries eps|ω_n τ| ≤
+    eps‖Fτ‖).  Measured: ≤ 18 eps (1 + ‖Mτ‖₁) over every case here and 1500 random
+    parameter sets (the worst at ω_n τ ≈ 5000, ω0 τ ≈ 170); 2000 leaves a margin of 100.
+    At the filter step that is 2.3e-13; at two days up to 5e-9."""
+    return 2000 * EPS * (1 + np.linalg.norm(M * tau, 1))
+
+
+def generators(p: ModelParams, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """F, the augmented [[F, I], [0, 0]] (Γ) and Van Loan's [[−F, Q], [0, Fᵀ]] (Q_d)."""
+    F, Z = dynamics_matrix(p), np.zeros((9, 9))
+    return F, np.block([[F, np.eye(9)], [Z, Z]]), np.block([[-F, Q], [Z, F.T]])
+
+
 @cache
 def expm_refs(name: str, tau: float, dense: bool):
     p = PARAMS[name]
-    F, n = dynamics_matrix(p), 9
-    Q = Q_DENSE if dense else noise_density(p, NOISE)
-    Z = np.zeros((n, n))
+    n = 9
+    F, aug, vl = generators(p, Q_DENSE if dense else noise_density(p, NOISE))
     Phi = sl.expm(F * tau)
-    Gam = sl.expm(np.block([[F, np.eye(n)], [Z, Z]]) * tau)[:n, n:]
-    V = sl.expm(np.block([[-F, Q], [Z, F.T]]) * tau)
+    Gam = sl.expm(aug * tau)[:n, n:]
+    V = sl.expm(vl * tau)
     Qd = V[n:, n:].T @ V[:n, n:]      # Φ · (top-right block), Van Loan (1978)
     return Phi, Gam, 0.5 * (Qd + Qd.T)
 
@@ -69,61 +84,99 @@ CASES = [(name, tau) for name in PARAMS for tau in TAUS]
 
 @pytest.mark.parametrize(("name", "tau"), CASES)
 def test_phi_theta_psi_and_Phi_match_expm(name, tau):
+    """Against expm(Fτ) block by block (tolerance: ``expm_tol``).  The zero block below φ
+    is structural (every G_k is zero there), so it is checked for exact zeros."""
     p = PARAMS[name]
     E = expm_refs(name, tau, False)[0]
+    tol = expm_tol(dynamics_matrix(p), tau)
     Phi = transition_matrix(p, tau)
-    assert rel(phi_closed(p, tau), E[:4, :4]) <= TOL
-    assert rel(theta_closed(p, tau), E[:4, 4:]) <= TOL
-    assert rel(psi_closed(p, tau), E[4:, 4:]) <= TOL
-    assert rel(Phi, E) <= TOL
-    assert rel(Phi[:4, :4], phi_closed(p, tau)) <= 1e-12   # stable form = Eq. 22
+    assert rel(phi_closed(p, tau), E[:4, :4]) <= tol
+    assert rel(theta_closed(p, tau), E[:4, 4:]) <= tol
+    assert rel(psi_closed(p, tau), E[4:, 4:]) <= tol
+    assert rel(Phi, E) <= tol
+    # Stable form = Eq. 22: both take cos/sin of the same float phases and sum O(1) pieces
+    # (|ω_n/(ω_n − ω0)| ≤ 1.5), so they differ by a few roundings: measured ≤ 4.8e-16.
+    assert rel(Phi[:4, :4], phi_closed(p, tau)) <= 1e-12
     assert np.all(Phi[4:, :4] == 0)
-    np.testing.assert_allclose(Phi[4:, 4:], psi_closed(p, tau), rtol=0, atol=1e-15)
+    # ψ ≤ 1 in magnitude, the same cos/sin of ω0τ by two routes (through the 1/ω0, 1/ω0²
+    # factors of G_k and back): a few roundings of O(1) terms, measured ≤ 1.5 eps (3.3e-16);
+    # 3e-14 ≈ 135 eps.
+    np.testing.assert_allclose(Phi[4:, 4:], psi_closed(p, tau), rtol=0, atol=3e-14)
 
 
 @pytest.mark.parametrize(("name", "tau"), CASES)
 def test_gamma_and_qd_match_augmented_expm_and_van_loan(name, tau):
-    """Γ and Q_d (Q of Eq. 34) at every τ.  With the dense Q, Van Loan's own error grows
-    past TOL beyond a few hundred seconds (1e-11 at 1 h, 1e-7–1e-5 at 1–2 days for these
-    sets, against 50-digit references: exp(−Fτ) and exp(Fτ) both carry θ's secular growth and
-    Φ·V12 cancels), so there the semigroup test below is the check."""
+    """Γ and Q_d (Q of Eq. 34) at every τ (tolerance: ``expm_tol`` of the augmented and
+    Van Loan matrices).  With the dense Q, Van Loan's own error grows past that beyond a
+    few hundred seconds (1e-11 at 1 h, 1e-7–1e-5 at 1–2 days for these sets, against
+    50-digit references: exp(−Fτ) and exp(Fτ) both carry θ's secular growth and Φ·V12
+    cancels), so there the semigroup test below is the check."""
     p = PARAMS[name]
     _, Gam, Qd = expm_refs(name, tau, False)
-    assert rel(input_integral(p, tau), Gam) <= TOL
-    assert rel(process_noise_integral(p, NOISE, tau), Qd) <= TOL
+    _, aug, vl = generators(p, noise_density(p, NOISE))
+    assert rel(input_integral(p, tau), Gam) <= expm_tol(aug, tau)
+    assert rel(process_noise_integral(p, NOISE, tau), Qd) <= expm_tol(vl, tau)
     if tau <= 173.0:
-        assert rel(process_noise_integral(p, Q_DENSE, tau), expm_refs(name, tau, True)[2]) <= TOL
+        vl_dense = generators(p, Q_DENSE)[2]
+        assert rel(process_noise_integral(p, Q_DENSE, tau),
+                   expm_refs(name, tau, True)[2]) <= expm_tol(vl_dense, tau)
 
 
 def test_expm_reference_is_good_to_the_tolerance():
-    """expm(Fτ) against expm(Fτ/2)²: the reference's own error is below TOL at 2 days."""
+    """expm(Fτ) against expm(Fτ/3)³ at 2 days: two independent roundings of the reference
+    agree to a fifth of ``expm_tol`` (measured: 1/160 of it at worst), so the tolerance
+    granted to the reference covers its error.  (Not expm(Fτ/2)²: scaling and squaring
+    computes expm(Fτ) as exactly that product, and the two agree bit for bit.)"""
     for name, p in PARAMS.items():
-        E = expm_refs(name, TAUS[-1], False)[0]
-        half = sl.expm(dynamics_matrix(p) * TAUS[-1] / 2)
-        assert rel(half @ half, E) < TOL / 5, name
+        F, tau = dynamics_matrix(p), TAUS[-1]
+        E = expm_refs(name, tau, False)[0]
+        third = sl.expm(F * tau / 3)
+        assert rel(third @ third @ third, E) < expm_tol(F, tau) / 5, name
 
 
 def _exact_taylor(p: ModelParams, Q: np.ndarray, tau: float, order: int = 24):
     """Φ, Γ, Q_d from their Taylor series in exact rational arithmetic (entries of F, Q and τ
     taken as the exact binary fractions they are): A_{k+1} = F A_k/(k+1),
     C_{k+1} = (F C_k + C_k Fᵀ)/(k+1), Φ = Σ A_k τ^k, Γ = Σ A_k τ^{k+1}/(k+1),
-    Q_d = Σ C_k τ^{k+1}/(k+1).  Truncation < (2‖F‖τ)^25/25! ≈ 1e-30 for τ ≤ 10 s."""
-    def exact(M):
-        return np.vectorize(Fraction, otypes=[object])(M)
-    F, C, A, t = exact(dynamics_matrix(p)), exact(Q), exact(np.eye(9)), Fraction(tau)
-    Phi, Gam, Qd = np.zeros((9, 9), object), np.zeros((9, 9), object), np.zeros((9, 9), object)
-    tk = Fraction(1)
-    for k in range(order + 1):
-        Phi, Gam, Qd = Phi + A * tk, Gam + A * (tk * t / (k + 1)), Qd + C * (tk * t / (k + 1))
-        A, C, tk = F.dot(A) / (k + 1), (F.dot(C) + C.dot(F.T)) / (k + 1), tk * t
-    return tuple(M.astype(float) for M in (Phi, Gam, Qd))
+    Q_d = Σ C_k τ^{k+1}/(k+1).  Truncation < (2‖F‖τ)^25/25! ≈ 1e-30 for τ ≤ 10 s.
+
+    Done in integers (F = F_i/d_F, Q = Q_i/d_Q, τ = a/b, every term over one common
+    denominator), which is exact like ``Fraction`` arithmetic but ~70 times faster; the
+    sums are rounded once, correctly (Python's int/int division)."""
+    def ints(M):
+        fr = [Fraction(float(v)) for v in M.ravel()]
+        d = max(f.denominator for f in fr)           # powers of two: the largest is the lcm
+        return np.array([int(f * d) for f in fr], dtype=object).reshape(M.shape), d
+
+    Fi, dF = ints(dynamics_matrix(p))
+    Qi, dQ = ints(np.asarray(Q))
+    t = Fraction(tau)
+    a, b, m = t.numerator, t.denominator, order
+    fact = [1]
+    for k in range(1, m + 2):
+        fact.append(fact[-1] * k)
+    A, C = np.eye(9, dtype=int).astype(object), Qi     # F_i^k and Ĉ_k = k! d_F^k d_Q C_k
+    Phi, Gam, Qd = (np.zeros((9, 9), object) for _ in range(3))
+    for k in range(m + 1):
+        # Everything over D = (m+1)! (d_F b)^m b (times d_Q for Q_d).
+        w_phi = fact[m + 1] // fact[k] * a**k * (dF * b) ** (m - k) * b
+        w_int = fact[m + 1] // fact[k + 1] * a ** (k + 1) * (dF * b) ** (m - k)
+        Phi, Gam, Qd = Phi + A * w_phi, Gam + A * w_int, Qd + C * w_int
+        A, C = Fi.dot(A), Fi.dot(C) + C.dot(Fi.T)
+    D = fact[m + 1] * (dF * b) ** m * b
+
+    def to_float(M, den):
+        return np.array([v / den for v in M.ravel()], dtype=float).reshape(M.shape)
+    return to_float(Phi, D), to_float(Gam, D), to_float(Qd, D * dQ)
 
 
 @pytest.mark.parametrize("name", ["goes", "ratio_-30"])
 @pytest.mark.parametrize("tau", [0.512, 1.0, 10.0])
 def test_every_element_is_exact_at_filter_steps(name, tau):
     """Element by element, not just in max norm: the small entries (θ's roll row, ~τ³, and
-    their Q_d products, ~τ⁵–τ⁷) keep their relative accuracy at the 0.512 s filter step."""
+    their Q_d products, ~τ⁵–τ⁷) keep their relative accuracy at the 0.512 s filter step.
+    Where the exact series is zero the closed form must be exactly zero too: those zeros are
+    structural (zero entries of every G_k and of Q, multiplied, never computed to cancel)."""
     p = PARAMS[name]
     for Q in (noise_density(p, NOISE), Q_DENSE):
         ref = _exact_taylor(p, Q, tau)
@@ -132,14 +185,17 @@ def test_every_element_is_exact_at_filter_steps(name, tau):
         for g, r in zip(got, ref, strict=True):
             nz = r != 0
             assert np.all(g[~nz] == 0)
-            assert np.max(np.abs(g - r)[nz] / np.abs(r[nz])) < 1e-13
+            # Each element is a sum of a few terms that cancel mildly (the short basis is
+            # in Newton order): measured ≤ 1.3e-15 (6 eps) relative; 2e-13 ≈ 900 eps.
+            assert np.max(np.abs(g - r)[nz] / np.abs(r[nz])) < 2e-13
 
 
 @pytest.mark.parametrize("name", list(PARAMS))
 def test_semigroup_identities(name):
     """Φ(τ1+τ2) = Φ(τ2)Φ(τ1), Γ(τ1+τ2) = Γ(τ2) + Φ(τ2)Γ(τ1),
     Q_d(τ1+τ2) = Q_d(τ2) + Φ(τ2) Q_d(τ1) Φ(τ2)ᵀ, including sums that cross the switch
-    between series and closed forms; Φ(0) = I, Γ(0) = Q_d(0) = 0 exactly."""
+    between series and closed forms; Φ(0) = I, Γ(0) = Q_d(0) = 0 exactly (every f_k and
+    each of their integrals carries a power of τ, so those zeros are structural)."""
     p = PARAMS[name]
     assert np.array_equal(transition_matrix(p, 0.0), np.eye(9))
     assert not input_integral(p, 0.0).any() and not process_noise_integral(p, Q_DENSE, 0.0).any()
@@ -151,6 +207,9 @@ def test_semigroup_identities(name):
                                          lambda p, t: process_noise_integral(p, Q_DENSE, t)))
         P2, G2, Q2 = (f(p, t2) for f in (transition_matrix, input_integral,
                                          lambda p, t: process_noise_integral(p, Q_DENSE, t)))
+        # Products of matrices whose entries reach ‖Φ‖ ~ 1e3–1e4 at days (θ's secular
+        # growth), relative to the largest entry: a few eps per product, plus eps|ω_n τ|
+        # of the float phase.  Measured ≤ 7.2e-15 for all three; 1e-12.
         assert rel(P2 @ P1, transition_matrix(p, t1 + t2)) < 1e-12
         assert rel(G2 + P2 @ G1, input_integral(p, t1 + t2)) < 1e-12
         assert rel(Q2 + P2 @ Q1 @ P2.T, process_noise_integral(p, Q_DENSE, t1 + t2)) < 1e-12
@@ -165,11 +224,17 @@ def test_regime_switches_are_seamless(name):
         for f in (transition_matrix, input_integral,
                   lambda p, t: process_noise_integral(p, Q_DENSE, t)):
             M = f(p, taus)
-            assert max(rel(a, b) for a, b in zip(M[:-1], M[1:], strict=True)) < 1e-14
+            # Neighbours one ulp of τ apart: each side is good to a few ulps of its largest
+            # O(1) pieces (the long basis's S_n and S_0 pieces partly cancel at |ω_n τ| = 2).
+            # Measured ≤ 3.5e-15 (16 eps); 5e-13 is still far below any mismatch between
+            # the two forms (a wrong or missing term is O(1e-3) or more).
+            assert max(rel(a, b) for a, b in zip(M[:-1], M[1:], strict=True)) < 5e-13
 
 
 @pytest.mark.parametrize("name", list(PARAMS))
 def test_qd_is_symmetric_positive_semidefinite(name):
+    """Exact symmetry is the requirement (identity): Q_d is returned as (X + Xᵀ)/2, whose
+    two halves are the same floating-point sums."""
     p = PARAMS[name]
     for Q in (noise_density(p, NOISE), Q_DENSE):
         Qd = process_noise_integral(p, Q, np.array(TAUS))
@@ -177,10 +242,16 @@ def test_qd_is_symmetric_positive_semidefinite(name):
         for M in Qd:
             d = np.sqrt(np.diag(M))
             assert np.all(d > 0)
+            # Eigenvalues of the 9×9 correlation matrix are good to ~9 eps; its smallest
+            # is measured ≥ 2.4e-4 here, so −1e-12 only allows rounding.
             assert np.linalg.eigvalsh(M / np.outer(d, d)).min() > -1e-12
 
 
 def test_vectorised_over_tau():
+    """An array of τ gives what each τ alone gives.  The zero pattern is structural and must
+    match exactly; the values may differ in the last bits (numpy's SIMD sin/cos for arrays
+    and BLAS summation order depend on the shape and the CPU): measured ≤ 3.4e-17 relative
+    to the largest entry; 1e-14 ≈ 45 eps."""
     p = PARAMS["goes"]
     tau = np.array([[0.0, 0.512, 30.0], [173.0, 3e4, 2e5]])
     for f in (phi_closed, psi_closed, theta_closed, transition_matrix, input_integral,
@@ -190,10 +261,13 @@ def test_vectorised_over_tau():
         for idx in np.ndindex(tau.shape):
             one = f(p, tau[idx])
             assert np.array_equal(many[idx] == 0, one == 0)
-            assert np.abs(many[idx] - one).max() <= 1e-15 * np.abs(one).max()
+            assert np.abs(many[idx] - one).max() <= 1e-14 * np.abs(one).max()
 
 
-def test_discretize_builds_the_filter_matrices_quickly():
+def test_discretize_builds_the_filter_matrices():
+    """Identity is the requirement here: ``discretize`` must hand the filter exactly the
+    matrices ``transition_matrix``, ``input_integral`` and ``process_noise_integral`` give
+    (one shared evaluation, no second code path).  Its speed is in ``make bench``."""
     p = PARAMS["goes"]
     d = discretize(p, NOISE, 0.512)
     assert isinstance(d, Discretization) and d.dt == 0.512
@@ -210,14 +284,6 @@ def test_discretize_builds_the_filter_matrices_quickly():
     pattern[4, 4] = pattern[7, 7] = pattern[8, 8] = True
     pattern[5:7, 5:7] = True
     assert not d.Phi[~pattern].any() and not d.Gamma[~pattern].any()
-    best = min(_timed(discretize, p, NOISE, 0.512) for _ in range(20))
-    assert best < 10e-3
-
-
-def _timed(f, *args) -> float:
-    t = time.perf_counter()
-    f(*args)
-    return time.perf_counter() - t
 
 
 def test_rejects_bad_input():
@@ -242,25 +308,20 @@ def _van_loan(F, Q, tau):
 def test_random_parameters_match_expm(log_w0, log_ratio, sign, log_H, frac):
     """Any momentum-biased set (|H| 3–300 N m s, ω_n/ω0 = ±2.2…±1000, ω0 = 1e-5…1e-2 rad/s)
     and τ from 0.1 s to min(2 days, 1000/|ω_n|, 30/ω0), so every series/closed-form
-    combination is exercised.  For the largest ‖F‖τ the expm references themselves drift
-    past TOL; their own error is gauged by their half-step consistency (Φ(τ/2)², …) and
-    allowed for."""
+    combination is exercised.  For the largest ‖F‖τ the expm references themselves drift;
+    ``expm_tol`` of each reference's generator allows for it (it was calibrated on 1500
+    such draws)."""
     w0, H = 10.0**log_w0, sign * 10.0**log_H
     inertia = abs(H) / (10.0**log_ratio * w0)
     p = ModelParams(inertia, inertia / 2, inertia, H, w0)
     tau = 0.1 * (min(172800.0, 1000 / abs(p.omega_n_radps), 30 / w0) / 0.1) ** frac
-    F, n, Q = dynamics_matrix(p), 9, noise_density(p, NOISE)
-    aug = np.block([[F, np.eye(n)], [np.zeros((n, n)), np.zeros((n, n))]])
-    refs, halves = [], []
-    for t in (tau, tau / 2):
-        Phi = sl.expm(F * t)
-        (refs if t == tau else halves).append((Phi, sl.expm(aug * t)[:n, n:], _van_loan(F, Q, t)))
-    (P, G, Qd), (Ph, Gh, Qh) = refs[0], halves[0]
-    consistency = (rel(Ph @ Ph, P), rel(Gh + Ph @ Gh, G), rel(Qh + Ph @ Qh @ Ph.T, Qd))
+    F, aug, vl = generators(p, noise_density(p, NOISE))
+    refs = (sl.expm(F * tau), sl.expm(aug * tau)[:9, 9:], _van_loan(F, noise_density(p, NOISE),
+                                                                   tau))
     closed = (transition_matrix(p, tau), input_integral(p, tau),
               process_noise_integral(p, NOISE, tau))
-    for c, r, e in zip(closed, (P, G, Qd), consistency, strict=True):
-        assert rel(c, r) < TOL + 10 * e
+    for c, r, M in zip(closed, refs, (F, aug, vl), strict=True):
+        assert rel(c, r) < expm_tol(M, tau)
 
 
 # --- The paper as printed ------------------------------------------------------------------
@@ -282,21 +343,30 @@ def printed_eq22(w0, wn, tau):
 
 @pytest.mark.parametrize("name", list(PARAMS))
 def test_printed_eq18_21_22_hold_element_by_element(name):
-    """Eq. 22 as printed has no typo: every one of the 16 elements matches exp(Aτ) to
-    ~1e-15 absolute, for H < 0 and H > 0 alike (ω_n signed, docs/paper-errata.md entry 1);
-    Eq. 21's eigenvalues ±iω0, ±iω_n and Eq. 18's ψ hold too."""
+    """Eq. 22 as printed has no typo: every one of the 16 elements (|φ| ≤ ~1.5) matches
+    exp(Aτ) to the reference's own accuracy, for H < 0 and H > 0 alike (ω_n signed,
+    docs/paper-errata.md entry 1); Eq. 21's eigenvalues ±iω0, ±iω_n and Eq. 18's ψ hold
+    too."""
     p = PARAMS[name]
     A, _, C = blocks(p)
     w0, wn = p.omega0_radps, p.omega_n_radps
     for tau in TAUS[:5]:
         E = sl.expm(A * tau)
-        assert np.abs(printed_eq22(w0, wn, tau) - E).max() < 1e-12
+        # measured ≤ 1.4e-13 at τ = 1 h (‖Aτ‖₁ ≈ 260, tolerance 1.2e-10)
+        assert np.abs(printed_eq22(w0, wn, tau) - E).max() < expm_tol(A, tau)
+        # The module's Eq. 22 and this transcription: same float phases, four O(1) pieces
+        # summed in another order; measured ≤ 3.3e-16 (1.5 eps), 3e-14 ≈ 135 eps.
         np.testing.assert_allclose(phi_closed(p, tau), printed_eq22(w0, wn, tau), rtol=0,
-                                   atol=1e-15)
-        assert np.abs(psi_closed(p, tau) - sl.expm(C * tau)).max() < 1e-12
-    eig = np.sort(np.abs(np.linalg.eigvals(A).imag))
-    np.testing.assert_allclose(eig, np.sort([w0, w0, abs(wn), abs(wn)]), rtol=1e-12)
-    assert np.abs(np.linalg.eigvals(A).real).max() < 1e-12 * abs(wn)
+                                   atol=3e-14)
+        # ψ ≤ 1: measured ≤ 1.3e-14
+        assert np.abs(psi_closed(p, tau) - sl.expm(C * tau)).max() < expm_tol(C, tau)
+    # An eigenvalue is computed to about eps‖A‖ absolute (‖A‖ ≈ |ω_n|), which for ±iω0 is
+    # ~eps|ω_n|/ω0 ≈ 1e-13 relative at GOES-Next (measured 1.1e-15 relative, 1e-19 absolute).
+    ev = np.linalg.eigvals(A)
+    atol = 100 * EPS * np.linalg.norm(A, 2)
+    np.testing.assert_allclose(np.sort(np.abs(ev.imag)), np.sort([w0, w0, abs(wn), abs(wn)]),
+                               rtol=0, atol=atol)
+    assert np.abs(ev.real).max() < atol                   # measured 9e-17 |ω_n|
 
 
 def test_eq22_needs_the_signed_nutation_rate():
@@ -321,5 +391,8 @@ def test_theta_has_only_the_papers_six_time_dependences(name):
     theta = np.array([sl.expm(F * t)[:4, 4:] for t in tau]).reshape(len(tau), -1)
     scale = np.abs(basis).max(0)
     coef = np.linalg.lstsq(basis / scale, theta, rcond=None)[0]
-    assert rel(basis / scale @ coef, theta) < TOL
-    assert rel(theta_closed(p, tau).reshape(len(tau), -1), theta) < TOL
+    # The residual is the references' own error (measured ≤ 3.5e-12 and, closed form
+    # against them, 3.8e-12, at ‖Fτ‖₁ up to 6400): expm_tol at the longest τ.
+    tol = expm_tol(F, tau[-1])
+    assert rel(basis / scale @ coef, theta) < tol
+    assert rel(theta_closed(p, tau).reshape(len(tau), -1), theta) < tol

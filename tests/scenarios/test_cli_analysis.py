@@ -63,6 +63,7 @@ def test_h_variance_follows_the_wheel_configuration():
     kc = 0.1082 * np.sin(np.deg2rad(1.656))
     nominal = estimator_sensor_specs(load_scenario("goes_next_equinox"))
     backup = estimator_sensor_specs(load_scenario("backup_wheel"))
+    # A few products of the same inputs: a few ulps apart at most.
     assert h_variance(nominal) == pytest.approx(2 * kc**2 * tach_variance(nominal), rel=1e-12)
     assert h_variance(backup) == pytest.approx((kc**2 + 0.008626**2) * tach_variance(backup),
                                                rel=1e-12)

@@ -96,6 +96,7 @@ def test_consistent_filter_passes_the_averaged_nees_test(stat_nominal):
     n = summary["nees"]
     lo, hi = stats.chi2.ppf([0.025, 0.975], 9 * M_OK) / M_OK
     assert n["dof"] == 9
+    # The same scipy quantiles, divided by M: a few ulps (1e-10 allows other scipy).
     assert n["bounds_95"] == pytest.approx([lo, hi], rel=1e-10)
     lo1, hi1 = stats.chi2.ppf([0.025, 0.975], M_OK) / M_OK
     assert n["per_state_bounds_95"] == pytest.approx([lo1, hi1], rel=1e-10)
@@ -162,6 +163,7 @@ def test_gap_end_yaw_statistics_of_a_gaussian(stat_nominal):
             assert stat["mean_deg"] == pytest.approx(0, abs=4 * sig / math.sqrt(n))
             lo, hi = chi2_var_interval(n, sig)
             assert lo <= stat["std_deg"] ** 2 <= hi
+            # √(mean of n equal σ²): the sum's rounding, ≲ n·ε = 1e-13.
             assert stat["predicted_sigma_deg"] == pytest.approx(sig, rel=1e-12)
             # The |e| quantile at a Gaussian's 1σ/2σ/3σ coverage p lies at kσ: the
             # Gaussian's coverage at the sample quantile is p within 4 binomial sd.

@@ -405,6 +405,9 @@ def test_cass_noise_grows_as_one_over_cos_off_boresight(equinox_day, name):
 
 
 def test_noise_switch_gives_quantised_truth_and_draws_nothing(equinox_day):
+    """Noise off: no generator is touched, and the outputs are the quantised truth.
+    Identity is the requirement for two noise-free runs with different streams: nothing
+    random may enter, so every byte must agree."""
     truth = equinox_day.truth
     suite = SensorSuite(noise_enabled=False)
     rngs_a, rngs_b = streams(1), streams(2)
@@ -418,6 +421,8 @@ def test_noise_switch_gives_quantised_truth_and_draws_nothing(equinox_day):
     def q(x, quantum):
         return np.round(x / quantum) * quantum
 
+    # Angles ≤ 0.1° through deg ↔ rad conversions: ulps of 1e-17; 1e-12° is 1e-10 of a
+    # quantum, and a quantum off is 0.01° (measured ≤ 3.5e-18°).
     np.testing.assert_allclose(a.roll_rad / DEG, q(truth.roll_rad / DEG, 0.01), rtol=0,
                                atol=1e-12)
     np.testing.assert_allclose(a.pitch_rad / DEG, q(truth.pitch_rad / DEG, 0.01), rtol=0,
@@ -440,6 +445,8 @@ def test_noise_switch_gives_quantised_truth_and_draws_nothing(equinox_day):
 
 
 def test_same_seed_is_bit_identical(equinox_day):
+    """Identity is the requirement here: a rerun with the same seed on the same machine
+    reproduces the telemetry byte for byte."""
     again = _day(EQUINOX_UTC)
     for key, arr in telemetry_arrays(equinox_day.telemetry).items():
         assert bit_identical(arr, telemetry_arrays(again.telemetry)[key]), key
@@ -460,6 +467,8 @@ def _sensor_outputs(tel) -> dict[str, np.ndarray]:
                                  "quantum_deg": 0.039, "noise_deg": 2.0}}}),
 ])
 def test_changing_one_sensor_leaves_the_others_bit_identical(equinox_day, changed, sensors):
+    """Identity is the requirement here: a sensor's parameters must not reach any other
+    sensor's stream, nor the truth, so everything else is byte-identical on one machine."""
     base = equinox_day
     other = _day(EQUINOX_UTC, sensors=sensors)
     assert bit_identical(base.truth.q_br, other.truth.q_br)   # same ripple stream
@@ -474,7 +483,8 @@ def test_changing_one_sensor_leaves_the_others_bit_identical(equinox_day, change
 
 def test_a_different_seed_changes_every_sensors_noise(equinox_day):
     """Same truth, sensed with streams(seed) and streams(seed + 1): every sensor's output
-    differs (the DSS only where its small noise crosses a quantisation step)."""
+    differs (the DSS only where its small noise crosses a quantisation step).  Identity is
+    the requirement for the same seed: reruns reproduce every byte."""
     truth, seed = equinox_day.truth, equinox_day.scenario.seed
     suite = SensorSuite()
     a = _sensor_outputs(make_telemetry(truth, suite, streams(seed)))
@@ -492,7 +502,7 @@ def test_a_different_seed_changes_every_sensors_noise(equinox_day):
 def test_each_sensor_draws_only_from_its_own_stream(equinox_day, stream):
     """Replacing one stream's generator changes that sensor alone.  (A parameter change
     cannot reveal two sensors sharing a generator when the number of draws stays the same;
-    this can.)"""
+    this can.)  Identity is the requirement for the untouched sensors."""
     truth, seed = equinox_day.truth, equinox_day.scenario.seed
     suite = SensorSuite()
     assert set(suite.stream_names()) == {"earth", "tachometer", *HEAD_ORDER}
@@ -528,6 +538,7 @@ def test_ground_yaw_with_zero_attitude_is_within_quantisation(spacecraft, orbit,
     env, ctrl = quiet
     epoch = ephemeris.parse_epoch(epoch_utc)
     truth = simulate_truth(spacecraft, orbit, env, ctrl, InitialState(), epoch, DAY_S)
+    # Exactly 0 here; 1.3e-19 rad with an FMA build (whose h_z is 2e-17 N m s, not 0).
     assert np.max(np.abs(truth.euler_rad)) < 1e-12
     tel, sep_sin, err, uses = _noise_free_yaw_errors(truth)
     assert np.all(tel.roll_rad == 0.0) and np.all(tel.pitch_rad == 0.0)
@@ -620,6 +631,7 @@ def zero_attitude_solstice(spacecraft, orbit, quiet):
     env, ctrl = quiet
     truth = simulate_truth(spacecraft, orbit, env, ctrl, InitialState(),
                            ephemeris.parse_epoch(SOLSTICE_UTC), DAY_S)
+    # Exactly 0 here; 1.3e-19 rad with an FMA build (whose h_z is 2e-17 N m s, not 0).
     assert np.max(np.abs(truth.euler_rad)) < 1e-12
     return truth
 
@@ -667,7 +679,9 @@ def test_tachometer_bias_shifts_every_wheel_in_rad_per_s(equinox_day):
     shift = b.wheel_speeds_radps - a.wheel_speeds_radps
     assert shift.shape[1] == 2
     np.testing.assert_allclose(shift, 5.1208e-3, rtol=1e-4)
-    np.testing.assert_allclose(shift, 3 * 0.0163 * RPM, rtol=0, atol=1e-12)
+    # A difference of two 574 rad/s readings, ulp 1.1e-13 each (measured 1.4e-13): 1e-10
+    # rad/s is 2e-8 of the shift, 900 ulps of the readings.
+    np.testing.assert_allclose(shift, 3 * 0.0163 * RPM, rtol=0, atol=1e-10)
 
     tel = make_telemetry(truth, _suite(tach=Tachometer(bias_rpm=0.005)), streams(seed))
     err = tel.wheel_speeds_radps - truth.wheel_speeds_radps
@@ -725,7 +739,7 @@ def test_dss_in_plane_bias_does_not_move_the_ground_yaw(zero_attitude_solstice, 
     b = make_telemetry(truth, _noise_off(_suite(dss=(1.0, 0.0))), streams(0))
     use = (a.yaw_head == dss) & (b.yaw_head == dss)
     assert use.sum() > 10_000
-    assert np.max(np.abs(b.yaw_rad[use] - a.yaw_rad[use])) < 1e-12
+    assert np.max(np.abs(b.yaw_rad[use] - a.yaw_rad[use])) < 1e-12  # rounding: 4.4e-16
     # And the readings really did move: α by 1°.
     np.testing.assert_allclose((b.sun.alpha_rad[use, dss] - a.sun.alpha_rad[use, dss]) / DEG,
                                1.0, rtol=0, atol=1e-9)
@@ -797,7 +811,7 @@ def test_dss_out_of_plane_bias_shifts_the_yaw_error_closed_loop(equinox_day):
 
 def test_zero_biases_are_bit_identical_to_no_biases(equinox_day):
     """Explicit zero biases (−0.0 too) give the very same bytes as the defaults, noise on
-    and off (a zero bias is never added)."""
+    and off (a zero bias is never added).  Identity is the requirement here."""
     truth, seed = equinox_day.truth, equinox_day.scenario.seed
     zeros = _suite(earth=EarthSensor(roll_bias_deg=0.0, pitch_bias_deg=-0.0),
                    tach=Tachometer(bias_rpm=-0.0), dss=(0.0, -0.0), cass1=(-0.0, 0.0),

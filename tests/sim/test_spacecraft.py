@@ -31,6 +31,10 @@ A1 = np.array([0.0, -np.cos(CANT), np.sin(CANT)])
 A2 = np.array([0.0, -np.cos(CANT), -np.sin(CANT)])
 
 PROP = settings(max_examples=200, deadline=None, database=None)
+# Round-off allowance for O(1) axis components and for the same conversion written in
+# another order (5485 · 2π/60 vs 5485 · 2π / 60): a few ulps (≤ 4.4e-16 relative); measured
+# 0 here.  1e-13 also covers libms and SIMD loops that round cos/sin differently.
+ROUND_OFF = 1e-13
 
 
 def pitch_bias_eq1(w1, w2):
@@ -56,22 +60,26 @@ def rotation(e, theta):
 @pytest.mark.parametrize("sc", [Spacecraft(), goes_next()], ids=["Spacecraft()", "goes_next()"])
 def test_goes_next_defaults_reproduce_paper(sc):
     assert sc.n_wheels == 2
-    np.testing.assert_allclose(sc.wheel_axes, [A1, A2], rtol=0, atol=1e-15)
-    np.testing.assert_allclose(np.linalg.norm(sc.wheel_axes, axis=1), 1.0, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(sc.wheel_inertias, [IW, IW], rtol=1e-15)
-    np.testing.assert_allclose(sc.wheel_speeds, [OMEGA_NOM, OMEGA_NOM], rtol=1e-14)
+    np.testing.assert_allclose(sc.wheel_axes, [A1, A2], rtol=0, atol=ROUND_OFF)
+    np.testing.assert_allclose(np.linalg.norm(sc.wheel_axes, axis=1), 1.0, rtol=0,
+                               atol=ROUND_OFF)
+    np.testing.assert_array_equal(sc.wheel_inertias, [IW, IW])  # stored, no arithmetic
+    np.testing.assert_allclose(sc.wheel_speeds, [OMEGA_NOM, OMEGA_NOM], rtol=ROUND_OFF)
 
     h_pitch = sc.pitch_bias_Nms()
     assert h_pitch == pytest.approx(pitch_bias_eq1(OMEGA_NOM, OMEGA_NOM), rel=1e-12)
     assert h_pitch == pytest.approx(H_PAPER, abs=0.05)
+    # h cancels two 1.8 N m s terms (ulp 2.2e-16): 1e-12 N m s is 4500 ulps.
     assert sc.yaw_momentum_Nms() == pytest.approx(0.0, abs=1e-12)
     hw = sc.wheel_momentum()
     assert hw.shape == (3,)
-    assert hw[0] == 0.0
+    assert hw[0] == 0.0  # structural: the axes' x components are exact zeros
     np.testing.assert_allclose(hw, [0.0, h_pitch, 0.0], rtol=0, atol=1e-12)
 
 
 def test_default_inertia_is_a_valid_diagonal_tensor():
+    """Identity is the requirement here: the tensor is stored and validated, never
+    computed, so it comes back exactly."""
     j = Spacecraft().J
     assert j.shape == (3, 3)
     np.testing.assert_array_equal(j, np.diag(np.diag(j)))
@@ -84,8 +92,8 @@ def test_canted_axes_formula():
     for cant_deg in (0.0, 1.656, 10.0, 45.0):
         c = np.deg2rad(cant_deg)
         a1, a2 = canted_axes(cant_deg)
-        np.testing.assert_allclose(a1, [0, -np.cos(c), np.sin(c)], rtol=0, atol=1e-15)
-        np.testing.assert_allclose(a2, [0, -np.cos(c), -np.sin(c)], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(a1, [0, -np.cos(c), np.sin(c)], rtol=0, atol=ROUND_OFF)
+        np.testing.assert_allclose(a2, [0, -np.cos(c), -np.sin(c)], rtol=0, atol=ROUND_OFF)
 
 
 @pytest.mark.parametrize("cant_deg", [90.0, -1.0, np.nan, np.inf])
@@ -96,10 +104,11 @@ def test_canted_axes_rejects_bad_cant(cant_deg):
 
 def test_wheel_momentum_and_goes_next_wheels_keyword_overrides():
     w = Wheel(0.2, (0.0, 0.6, -0.8), 300.0)
-    np.testing.assert_allclose(w.momentum_Nms, [0.0, 36.0, -48.0], rtol=1e-15)
+    np.testing.assert_allclose(w.momentum_Nms, [0.0, 36.0, -48.0], rtol=ROUND_OFF)
     wheels = goes_next_wheels(spin_inertia_kgm2=0.05, cant_deg=5.0, speed_rpm=4000.0)
     sc = Spacecraft(wheels=wheels)
     c = np.deg2rad(5.0)
+    # The same few products in another order: a few ulps.
     assert sc.pitch_bias_Nms() == pytest.approx(-0.05 * 2 * 4000 * RPM_TO_RADPS * np.cos(c),
                                                 rel=1e-12)
 
@@ -115,6 +124,8 @@ def test_yaw_momentum_eq2_with_unequal_speeds():
     speeds = np.array([w1, w2])
     h_ref = yaw_momentum_eq2(w1, w2)
     assert h_ref == pytest.approx(0.02783, rel=1e-3)  # sanity on the hand calculation
+    # Ω1 − Ω2 cancels 574 rad/s down to 8.9: a condition of 65, so ~65 ulps (1.4e-14)
+    # at worst against 1e-12.
     assert sc.yaw_momentum_Nms(speeds) == pytest.approx(h_ref, rel=1e-12)
     assert sc.pitch_bias_Nms(speeds) == pytest.approx(pitch_bias_eq1(w1, w2), rel=1e-12)
     # Swapping the speeds reverses h.
@@ -127,6 +138,8 @@ def test_eq1_eq2_over_speed_range(rpm1, rpm2):
     sc = Spacecraft()
     w1, w2 = rpm1 * RPM_TO_RADPS, rpm2 * RPM_TO_RADPS
     speeds = np.array([w1, w2])
+    # Absolute, since h → 0 as the speeds meet: its terms reach 2.3 N m s (ulp 4.4e-16)
+    # and H's 160 N m s (ulp 2.8e-14), so 1e-12 and 1e-11 are a few hundred ulps.
     assert sc.yaw_momentum_Nms(speeds) == pytest.approx(yaw_momentum_eq2(w1, w2), abs=1e-12)
     assert sc.pitch_bias_Nms(speeds) == pytest.approx(pitch_bias_eq1(w1, w2), abs=1e-11)
 
@@ -138,7 +151,11 @@ def test_momentum_accepts_leading_dimensions():
     h = sc.yaw_momentum_Nms(speeds)
     big_h = sc.pitch_bias_Nms(speeds)
     assert h.shape == (4, 5) and big_h.shape == (4, 5)
-    np.testing.assert_allclose(h, yaw_momentum_eq2(speeds[..., 0], speeds[..., 1]), rtol=1e-12)
+    # h cancels two wheel terms of up to 1.9 N m s (ulp 2.2e-16) and the speeds drawn come
+    # within 0.27 rad/s of each other (a factor of 2200): absolute, as in the property test
+    # above (measured 1.9e-16 N m s, 7e-14 relative).
+    np.testing.assert_allclose(h, yaw_momentum_eq2(speeds[..., 0], speeds[..., 1]), rtol=0,
+                               atol=1e-12)
     np.testing.assert_allclose(big_h, pitch_bias_eq1(speeds[..., 0], speeds[..., 1]),
                                rtol=1e-12)
     assert sc.wheel_momentum(speeds).shape == (4, 5, 3)
@@ -153,9 +170,9 @@ def test_backup_configuration():
     sc = goes_next_backup()
     assert sc.n_wheels == 2
     mw, rw = sc.wheels
-    np.testing.assert_allclose(mw.axis, A1, rtol=0, atol=1e-15)
-    assert mw.spin_inertia_kgm2 == IW
-    assert mw.speed_radps == pytest.approx(OMEGA_NOM, rel=1e-14)
+    np.testing.assert_allclose(mw.axis, A1, rtol=0, atol=ROUND_OFF)
+    assert mw.spin_inertia_kgm2 == IW  # stored constants: no arithmetic, exact
+    assert mw.speed_radps == pytest.approx(OMEGA_NOM, rel=ROUND_OFF)
     assert rw.spin_inertia_kgm2 == YAW_RW_IW
     np.testing.assert_array_equal(rw.axis, [0.0, 0.0, 1.0])
     # The reaction wheel cancels the momentum wheel's yaw component: I_rw Ω_rw = −I_w Ω sin c.
@@ -165,7 +182,7 @@ def test_backup_configuration():
     nominal = pitch_bias_eq1(OMEGA_NOM, OMEGA_NOM)
     assert sc.pitch_bias_Nms() == pytest.approx(0.5 * nominal, rel=1e-12)
     assert sc.pitch_bias_Nms() == pytest.approx(0.5 * H_PAPER, abs=0.03)
-    assert sc.wheel_momentum()[0] == 0.0
+    assert sc.wheel_momentum()[0] == 0.0  # structural zero, as above
 
 
 # --------------------------------------------------------------------------------------
@@ -215,6 +232,7 @@ def test_check_inertia_message_uses_name():
 
 
 def test_goes_tensor_with_products_of_inertia_is_accepted():
+    """Identity is the requirement here: validation must return the tensor unchanged."""
     out = check_inertia(GOES_WITH_PRODUCTS)
     np.testing.assert_array_equal(out, GOES_WITH_PRODUCTS)
     assert out.dtype == np.float64
