@@ -60,15 +60,33 @@ def _process_start_epoch(pid: int) -> float | None:
     return boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22: starttime
 
 
+def _is_dying(pid: int) -> bool:
+    """True if process ``pid`` is a zombie or has a SIGKILL pending: it will never
+    write again.  A killed process of a gigabyte or two takes a second or two to
+    release its memory and be reaped, and the user's next command may come sooner."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        status = Path(f"/proc/{pid}/status").read_text()
+    except (OSError, IndexError):
+        return False
+    if state in ("Z", "X", "x"):
+        return True
+    pending = [int(line.split()[1], 16) for line in status.splitlines()
+               if line.startswith(("SigPnd:", "ShdPnd:"))]
+    return any(mask & (1 << (9 - 1)) for mask in pending)   # bit 8: SIGKILL
+
+
 def _owner_is_gone(pid: int, since: float) -> bool:
-    """True if no process ``pid`` runs, or the one that does started after ``since``
-    (the pid was reused).  A process of another user counts as alive."""
+    """True if no process ``pid`` runs, it is dying, or the one that does started
+    after ``since`` (the pid was reused).  A process of another user counts as alive."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return True
     except PermissionError:
         return False
+    if _is_dying(pid):
+        return True
     started = _process_start_epoch(pid)
     # /proc's start time is in clock ticks; allow a few seconds of rounding.
     return started is not None and started > since + 5.0

@@ -124,6 +124,31 @@ def test_the_next_run_removes_a_stage_whose_owner_was_killed(tmp_path, capsys):
     assert err == f"dynprop: note: removed {stale}, left by process {pid}, which is gone\n"
 
 
+def test_a_stage_whose_owner_was_killed_but_not_yet_reaped_is_stale(tmp_path):
+    """Right after a SIGKILL the owner may still exist: a two-gigabyte process takes a
+    second or two to release its memory and be reaped (measured 1.6–1.9 s after
+    `timeout -s KILL`), and a user's next command comes sooner.  A zombie never
+    writes again, so its stage goes."""
+    if not Path("/proc/self/stat").exists():
+        pytest.skip("no /proc: a zombie cannot be told from a live process")
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        os.kill(child.pid, signal.SIGKILL)
+        for _ in range(1000):       # until the kernel has made it a zombie; not reaped
+            state = Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+            if state == "Z":
+                break
+            time.sleep(0.01)
+        assert state == "Z"
+        stage = tmp_path / f".eq.stage-{socket.gethostname()}-{child.pid}-abcd1234"
+        stage.mkdir()
+        assert clean_stale(tmp_path) == [f"removed {stage}, left by process {child.pid}, "
+                                         "which is gone"]
+        assert not stage.exists()
+    finally:
+        child.wait()
+
+
 def test_a_run_moved_aside_by_a_killed_force_is_put_back(tmp_path):
     """Killed between moving the previous run aside and renaming the new one in:
     the previous run is restored, not deleted."""
