@@ -48,6 +48,8 @@ from estimator.model import (
 )
 from estimator.transition import discretize
 
+from .cov_helpers import cov_dev
+
 W0 = 2 * np.pi / 86164.0905
 # scenarios/schema.py defaults for the torque random walks (not in the paper)
 Q_RW = 3e-18
@@ -62,12 +64,6 @@ def goes_next(sign: float = 1.0, inertia_factor: float = 1.0) -> ModelParams:
 def paper_noise(rw: float = Q_RW) -> ProcessNoise:
     q = torque_noise_density()
     return ProcessNoise(q, q, ripple_noise_density(), rw, rw, rw, rw)
-
-
-def cov_dev(P, P_ref) -> np.ndarray:
-    """|P − P_ref| / √(P_ref,ii P_ref,jj), element by element: the states have mixed units."""
-    d = np.sqrt(np.einsum("...ii->...i", P_ref))
-    return np.abs(P - P_ref) / (d[..., :, None] * d[..., None, :])
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])

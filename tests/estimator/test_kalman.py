@@ -28,6 +28,8 @@ from estimator.model import (
     noise_density,
 )
 
+from .cov_helpers import cov_dev
+
 DT = 0.512
 # GOES-Next numbers from the paper (Section 2, Eq. 1), typed here independently.
 H = -0.1082 * 2 * 5485 * 2 * np.pi / 60 * np.cos(np.deg2rad(1.656))
@@ -79,12 +81,6 @@ def simulate_linear(n_steps, n_runs, rng, disc=DISC, yaw_hours=16.0, u=None):
 
 def meas(z):
     return Measurements(z[:, 0], z[:, 1], z[:, 2], R_ROLL, R_YAW, R_H)
-
-
-def cov_dev(P, P_ref) -> np.ndarray:
-    """|P − P_ref| / √(P_ref,ii P_ref,jj), element by element (any leading shape)."""
-    d = np.sqrt(np.einsum("...ii->...i", P_ref))
-    return np.abs(P - P_ref) / (d[..., :, None] * d[..., None, :])
 
 
 def est_dev(x, x_ref, P_ref) -> np.ndarray:
