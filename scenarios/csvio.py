@@ -13,10 +13,10 @@ Two number formats:
   quantised reading is written as its decimal, ``5485.0967``, not the 17 digits
   ``5485.0967000000001``.
 - otherwise 10 significant digits (``%.10g``), for truth.csv and estimate.csv,
-  which are read by people and plotting tools: each value is kept to 5e-11 of
-  itself, i.e. 1e-12° on a 0.02° attitude, 1e-8° on a 180° yaw, 3e-7 rpm on
-  5485 rpm and 1e-16 N m on a 2e-6 N m torque estimate, far below every sensor
-  quantum and every σ the filter reports.  A re-read differs from the run's
+  which are read by people and plotting tools: each value is kept to within 5e-10
+  of itself (half a unit of the tenth digit), i.e. 1e-11° on a 0.02° attitude,
+  9e-8° on a 180° yaw, 3e-6 rpm on 5485 rpm and 1e-15 N m on a 2e-6 N m torque
+  estimate, far below every sensor quantum and every σ the filter reports.  A re-read differs from the run's
   doubles in those digits; the run's summary is computed from the doubles.
 """
 
