@@ -263,7 +263,7 @@ def test_periodic_gap_matches_the_kalman_filter_over_a_day(gap):
     z[n_day - n_gap:, 1] = np.nan                  # no yaw over the gap
     meas = Measurements(z[:, 0], z[:, 1], z[:, 2], roll_variance(sensors),
                         yaw_variance(sensors), h_variance(sensors))
-    k = np.round(gap.times_s / dt).astype(int)     # the profile's sample indices
+    k = np.round(gap.times_s / dt).astype(int)     # sample indices; times are k·dt both ways
     assert np.array_equal(k * dt, gap.times_s) and k[0] == 0 and k[-1] == n_day
     disc = discretize(p, noise, dt)
     res = kalman_filter(meas, disc, np.zeros(N_STATES), gap.P_gap_end, rows=k[1:-1] - 1)

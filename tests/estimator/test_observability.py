@@ -64,7 +64,9 @@ def test_reduced_state_is_observable_at_power_six(configs):
 
 
 def test_reduced_model_is_eq29_as_printed(configs):
-    """F′ from deleting N_cz equals Eqs. 29b–d typed from the paper."""
+    """F′ from deleting N_cz equals Eqs. 29b–d typed from the paper.  Compared exactly:
+    each entry is one IEEE operation (ω0/H, 1/H, ω0) on the same inputs, or a structural
+    0 or 1, which no CPU rounds differently."""
     p = goes_next()
     w0, H = p.omega0_radps, p.H_Nms
     Bp = np.array([[0, 0, 0, 0], [w0, 1, 0, 1], [0, 0, 0, 0], [0, 0, 1, 0]]) / H
@@ -184,6 +186,7 @@ def test_small_textbook_cases():
 
 
 def test_measurement_rows_match_eq26():
+    """Structural 0/1 rows: identity is the requirement."""
     rows = measurement_rows()
     G = np.vstack([rows["roll"], rows["yaw"], rows["h"]])
     expected = np.zeros((3, 9))

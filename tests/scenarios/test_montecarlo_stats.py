@@ -117,6 +117,7 @@ def test_consistent_filter_passes_the_averaged_nees_test(stat_nominal):
         0.95, abs=binomial_tol(0.95, g))
     # The figures' arrays.
     assert fig["nees_avg"].shape == (G,)
+    # The same doubles written twice (npz and JSON round-trip them): identity.
     assert np.array_equal(fig["nees_bounds"], np.array([n["bounds_95"][0],
                                                         n["bounds_95"][1]]))
 

@@ -239,6 +239,7 @@ def test_bad_override_names_the_key_path(assignment, prefix):
 
 def test_named_empty_scenario_takes_the_papers_goes_next_numbers():
     s = validate({"name": "bare"})
+    # Stored defaults, no arithmetic: compared exactly.
     np.testing.assert_array_equal(
         s.spacecraft.inertia_kgm2,
         [[3364.376, 0, 0], [0, 954.936, 0], [0, 0, 3461.393]])  # paper Section 2.3
@@ -268,7 +269,7 @@ def test_default_spacecraft_has_the_papers_pitch_bias():
     assert sc.pitch_bias_Nms() == pytest.approx(expected, rel=1e-12)
     assert sc.pitch_bias_Nms() == pytest.approx(-124.2, abs=0.05)
     assert sc.yaw_momentum_Nms() == pytest.approx(0.0, abs=1e-12)
-    np.testing.assert_array_equal(sc.J, np.diag([3364.376, 954.936, 3461.393]))
+    np.testing.assert_array_equal(sc.J, np.diag([3364.376, 954.936, 3461.393]))  # stored
 
 
 def test_default_solar_residual_is_a_trimmed_one():
@@ -324,7 +325,7 @@ def test_backup_wheel_has_the_yaw_reaction_wheel():
     assert sc.n_wheels == 2
     yaw_wheel = sc.wheels[1]
     assert yaw_wheel.spin_inertia_kgm2 == 0.008626
-    np.testing.assert_array_equal(yaw_wheel.axis, (0.0, 0.0, 1.0))
+    np.testing.assert_array_equal(yaw_wheel.axis, (0.0, 0.0, 1.0))  # stored constant
     # one momentum wheel: half the nominal bias, and the yaw wheel cancels its h
     half = -0.1082 * 5485 * RPM * math.cos(math.radians(1.656))
     assert sc.pitch_bias_Nms() == pytest.approx(half, rel=1e-12)

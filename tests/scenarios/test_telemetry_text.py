@@ -74,6 +74,7 @@ def test_written_readings_differ_from_the_simulated_ones_by_ulps_only(one_day):
     for column, values in (("roll_deg", sim.telemetry.roll_rad * RAD2DEG),
                            ("wheel1_rpm", sim.telemetry.wheel_speeds_radps[:, 0] * RADPS2RPM),
                            ("cass1_alpha_deg", sim.telemetry.sun.alpha_rad[:, 1] * RAD2DEG)):
+        # Missing readings stay missing, the same samples exactly.
         np.testing.assert_array_equal(np.isnan(written[column]), np.isnan(values))
         ok = ~np.isnan(values)
         # A deg↔rad or rpm↔rad/s round trip costs a few ulps of the value: 1e-14 relative
@@ -102,6 +103,7 @@ def test_as_decimal_reading_gives_the_nearest_double_to_the_decimal():
 
 
 def test_a_quantum_without_a_short_decimal_leaves_readings_alone():
+    """Identity is the requirement: such readings are passed through untouched."""
     assert decimals_of(0.0163) == 4 and decimals_of(0.125) == 3 and decimals_of(1.0) == 0
     assert decimals_of(1 / 3) is None
     x = np.array([1 / 3, 2 / 3])
