@@ -16,8 +16,9 @@ Two number formats:
   which are read by people and plotting tools: each value is kept to within 5e-10
   of itself (half a unit of the tenth digit), i.e. 1e-11° on a 0.02° attitude,
   9e-8° on a 180° yaw, 3e-6 rpm on 5485 rpm and 1e-15 N m on a 2e-6 N m torque
-  estimate, far below every sensor quantum and every σ the filter reports.  A re-read differs from the run's
-  doubles in those digits; the run's summary is computed from the doubles.
+  estimate, far below every sensor quantum and every σ the filter reports.  A
+  re-read differs from the run's doubles in those digits; the run's summary is
+  computed from the doubles.
 """
 
 from __future__ import annotations
