@@ -11,10 +11,10 @@ from estimator.kalman import rts_smoother
 from estimator.transition import discretize
 
 from . import build
+from .comparison import comparison_arrays
 from .csvio import BackgroundWriter, read_csv, write_csv
 from .loader import cap_lines, closest
 from .outputs import (
-    comparison_arrays,
     estimate_columns,
     nees_series,
     summarize,
