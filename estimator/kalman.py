@@ -78,10 +78,12 @@ def _sparse_sym(flat) -> ca.SX:
 
 
 def _params_sym():
-    """Φ (81), Γ (81), Q_d (45) as one parameter vector."""
-    p = ca.SX.sym("p", 2 * N_STATES**2 + N_UT)
+    """Φ (81), Γ (81), Q_d (45) and the unit extra noise Q_e (45) as one parameter
+    vector."""
+    p = ca.SX.sym("p", 2 * N_STATES**2 + 2 * N_UT)
     n2 = N_STATES**2
-    return p, _sparse_sym(p[:n2]), _sparse_sym(p[n2:2 * n2]), _unpack_sym(p[2 * n2:])
+    return (p, _sparse_sym(p[:n2]), _sparse_sym(p[n2:2 * n2]),
+            _unpack_sym(p[2 * n2:2 * n2 + N_UT]), _unpack_sym(p[2 * n2 + N_UT:]))
 
 
 def _symmetric(P) -> ca.SX:
@@ -90,25 +92,50 @@ def _symmetric(P) -> ca.SX:
     return _unpack_sym(_pack_sym(P))
 
 
-def pack_params(disc) -> np.ndarray:
+@dataclass(frozen=True)
+class ExtraNoise:
+    """Process noise added on chosen steps: step k adds ``scale[k] · Qd_unit``.
+
+    For a telemetry dropout the wheel torque N_w* is bridged, not measured, so
+    its uncertainty is added as the paper's wheel-torque noise q_w (Eq. 34, which
+    drives ẏ and h together) on the bridged steps only: ``Qd_unit`` is Q_d for
+    q_w = 1 (N m)² s and ``scale`` the q_w of each step (zero elsewhere, which
+    leaves those steps bit for bit as without it)."""
+
+    scale: np.ndarray       # (N,)
+    Qd_unit: np.ndarray     # (9, 9)
+
+
+def _extra(extra: ExtraNoise | None, n: int) -> tuple[np.ndarray, np.ndarray]:
+    if extra is None:
+        return np.zeros(n), np.zeros((N_STATES, N_STATES))
+    scale = np.asarray(extra.scale, dtype=float)
+    if scale.shape != (n,) or not np.all(np.isfinite(scale) & (scale >= 0)):
+        raise ValueError(f"extra noise scale must be ({n},), finite and non-negative")
+    return scale, np.asarray(extra.Qd_unit, dtype=float)
+
+
+def pack_params(disc, Qd_unit=None) -> np.ndarray:
     Phi, Gam, Qd = (np.asarray(m, dtype=float) for m in (disc.Phi, disc.Gamma, disc.Qd))
+    Qe = np.zeros((N_STATES, N_STATES)) if Qd_unit is None else np.asarray(Qd_unit, float)
     for name, M in (("Phi", Phi), ("Gamma", Gam)):
         off = np.abs(M[~PHI_PATTERN]).max(initial=0.0)
         if off > 1e-12 * np.abs(M).max():
             raise ValueError(f"{name} has entries outside the structure of Eq. 15 ({off:g})")
-    return np.concatenate([Phi.ravel(order="F"), Gam.ravel(order="F"), pack(Qd)])
+    return np.concatenate([Phi.ravel(order="F"), Gam.ravel(order="F"), pack(Qd), pack(Qe)])
 
 
 @lru_cache(maxsize=2)
 def filter_step() -> ca.Function:
-    """``(s, z, m, r, u, p) -> (s_next, aux)`` with s = [x⁻, P⁻ (45)] at t_k,
+    """``(s, z, m, r, u, e, p) -> (s_next, aux)`` with s = [x⁻, P⁻ (45)] at t_k,
     m the 0/1 presence of each measurement (z is 0 where absent: NaN never enters
     the compiled code, and CasADi would fold a ``z == z`` NaN test to true), and
-    aux = [x⁺, P⁺ (45), ν (3), S (3)] (the caller blanks ν, S where m = 0)."""
+    aux = [x⁺, P⁺ (45), ν (3), S (3)] (the caller blanks ν, S where m = 0), and e the
+    step's extra-noise scale (``ExtraNoise``)."""
     s = ca.SX.sym("s", N_STATES + N_UT)
     z, m = ca.SX.sym("z", 3), ca.SX.sym("m", 3)
-    r, u = ca.SX.sym("r", 3), ca.SX.sym("u", N_STATES)
-    p, phi, gam, qd = _params_sym()
+    r, u, e = ca.SX.sym("r", 3), ca.SX.sym("u", N_STATES), ca.SX.sym("e")
+    p, phi, gam, qd, qe = _params_sym()
     x, P = s[:N_STATES], _unpack_sym(s[N_STATES:])
     eye = ca.SX.eye(N_STATES)
     nus, ss = [], []
@@ -126,31 +153,33 @@ def filter_step() -> ca.Function:
         nus.append(nu)
         ss.append(S)
     x_next = phi @ x + gam @ u
-    P_next = _symmetric(phi @ P @ phi.T + qd)
+    # + e·Q_e after + Q_d: with e = 0 it adds (±)0 and changes no bit.
+    P_next = _symmetric(phi @ P @ phi.T + qd + e * qe)
     out = ca.cse(ca.vertcat(x_next, _pack_sym(P_next), x, _pack_sym(P), *nus, *ss))
     n_s = N_STATES + N_UT
-    return ca.Function("dynprop_kf", [s, z, m, r, u, p], [out[:n_s], out[n_s:]],
-                       ["s", "z", "m", "r", "u", "p"], ["s_next", "aux"])
+    return ca.Function("dynprop_kf", [s, z, m, r, u, e, p], [out[:n_s], out[n_s:]],
+                       ["s", "z", "m", "r", "u", "e", "p"], ["s_next", "aux"])
 
 
 @lru_cache(maxsize=2)
 def smoother_step() -> ca.Function:
-    """Backward RTS step ``(s, x⁺_k, P⁺_k, u_k, p) -> (s_prev, aux)`` with
+    """Backward RTS step ``(s, x⁺_k, P⁺_k, u_k, e_k, p) -> (s_prev, aux)`` with
     s = [x^s_{k+1}, P^s_{k+1}]; aux = [x^s_k, P^s_k]."""
     s = ca.SX.sym("s", N_STATES + N_UT)
     xk, pk, u = ca.SX.sym("x", N_STATES), ca.SX.sym("P", N_UT), ca.SX.sym("u", N_STATES)
-    p, phi, gam, qd = _params_sym()
+    e = ca.SX.sym("e")
+    p, phi, gam, qd, qe = _params_sym()
     Pk = _unpack_sym(pk)
     xs1, Ps1 = s[:N_STATES], _unpack_sym(s[N_STATES:])
     x_pred = phi @ xk + gam @ u
-    P_pred = _symmetric(phi @ Pk @ phi.T + qd)
+    P_pred = _symmetric(phi @ Pk @ phi.T + qd + e * qe)
     # C = P_k Φᵀ P⁻¹_pred, from a solve with the symmetric P_pred.
     C = ca.solve(P_pred, phi @ Pk).T
     xs = xk + C @ (xs1 - x_pred)
     Ps = Pk + C @ (Ps1 - P_pred) @ C.T
     out = ca.cse(ca.vertcat(xs, _pack_sym(Ps)))
-    return ca.Function("dynprop_rts", [s, xk, pk, u, p], [out, out], ["s", "x", "P", "u", "p"],
-                       ["s_prev", "aux"])
+    return ca.Function("dynprop_rts", [s, xk, pk, u, e, p], [out, out],
+                       ["s", "x", "P", "u", "e", "p"], ["s_prev", "aux"])
 
 
 @lru_cache(maxsize=4)
@@ -233,12 +262,14 @@ def _inputs(u, n) -> np.ndarray:
 
 
 def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None = None,
-                  chunk: int = 4096, rows=None) -> FilterResult:
+                  chunk: int = 4096, rows=None, extra: ExtraNoise | None = None
+                  ) -> FilterResult:
     """Run the filter over every sample.  ``disc`` has Φ, Γ, Q_d for the sample
     interval (``estimator.transition.discretize``); x0, P0 are the prior at the first
     sample; ``u`` the (N, 9) input vectors of Eq. 12a (zero if None).  With ``rows``
     (increasing sample indices) the history holds only those samples, bit for bit
-    the full run's, without the full history's memory."""
+    the full run's, without the full history's memory.  ``extra`` adds process
+    noise on chosen steps (``ExtraNoise``: a telemetry dropout)."""
     z, r = meas.z(), meas.r()
     n = len(z)
     x0, P0 = np.asarray(x0, dtype=float), np.asarray(P0, dtype=float)
@@ -247,13 +278,15 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
     engine = _engine("filter", chunk, backend)
     s0 = np.concatenate([x0, pack(0.5 * (P0 + P0.T))])
     present = np.isfinite(z)
-    inputs = [np.where(present, z, 0.0), present.astype(float), r, _inputs(u, n)]
+    scale, Qd_unit = _extra(extra, n)
+    inputs = [np.where(present, z, 0.0), present.astype(float), r, _inputs(u, n), scale]
+    p = pack_params(disc, Qd_unit)
     if rows is None:
-        states, aux = engine.run(s0, inputs, pack_params(disc))
+        states, aux = engine.run(s0, inputs, p)
         last = states[-1]
     else:
         rows = np.asarray(rows, dtype=np.int64)
-        last, aux = engine.run_rows(s0, inputs, pack_params(disc), rows)
+        last, aux = engine.run_rows(s0, inputs, p, rows)
         present = present[rows]
     nu = aux[:, N_STATES + N_UT:N_STATES + N_UT + 3]
     S = aux[:, -3:]
@@ -264,28 +297,33 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
 
 
 def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
-                 chunk: int = 4096) -> SmootherResult:
-    """Rauch–Tung–Striebel smoother over a stored filter history."""
+                 chunk: int = 4096, extra: ExtraNoise | None = None) -> SmootherResult:
+    """Rauch–Tung–Striebel smoother over a stored filter history (with the
+    filter's own ``u`` and ``extra``)."""
     n = len(result.x)
     if n < 2:  # nothing to smooth: the last filter estimate is the smoothed one
         return SmootherResult(result.x.copy(), result.P_packed.copy())
     u = _inputs(u, n)
+    scale, Qd_unit = _extra(extra, n)
     engine = _engine("smoother", chunk, backend)
     # Backwards: step k uses the filter's k-th posterior and input, for k = n−2 … 0.
     rev = slice(n - 2, None, -1)
     s0 = np.concatenate([result.x[-1], result.P_packed[-1]])
-    _, aux = engine.run(s0, [result.x[rev], result.P_packed[rev], u[rev]], pack_params(disc))
+    _, aux = engine.run(s0, [result.x[rev], result.P_packed[rev], u[rev], scale[rev]],
+                        pack_params(disc, Qd_unit))
     xs = np.vstack([aux[::-1, :N_STATES], result.x[-1:]])
     Ps = np.vstack([aux[::-1, N_STATES:], result.P_packed[-1:]])
     return SmootherResult(xs, Ps)
 
 
-def dense_filter(meas: Measurements, disc, x0, P0, u=None) -> tuple[np.ndarray, np.ndarray]:
+def dense_filter(meas: Measurements, disc, x0, P0, u=None, extra: ExtraNoise | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """Reference implementation in plain numpy, one Python loop iteration per step
     (slow; for tests).  Returns the a-posteriori x (N, 9) and P (N, 9, 9)."""
     z, r = meas.z(), meas.r()
     n = len(z)
     u = _inputs(u, n)
+    scale, Qd_unit = _extra(extra, n)
     Phi, Gam, Qd = (np.asarray(m, dtype=float) for m in (disc.Phi, disc.Gamma, disc.Qd))
     x, P = np.asarray(x0, dtype=float).copy(), np.asarray(P0, dtype=float).copy()
     xs, Ps = np.empty((n, N_STATES)), np.empty((n, N_STATES, N_STATES))
@@ -302,5 +340,5 @@ def dense_filter(meas: Measurements, disc, x0, P0, u=None) -> tuple[np.ndarray, 
             P = IKG @ P @ IKG.T + r[k, i] * K @ K.T
         xs[k], Ps[k] = x, P
         x = Phi @ x + Gam @ u[k]
-        P = Phi @ P @ Phi.T + Qd
+        P = Phi @ P @ Phi.T + Qd + scale[k] * Qd_unit
     return xs, Ps

@@ -36,7 +36,17 @@ def yaw_momentum(wheel_speeds_radps: np.ndarray, yaw_factors: np.ndarray) -> np.
 
 
 def wheel_torque(h_Nms: np.ndarray, dt_s: float, window_s: float = 20.0) -> np.ndarray:
-    """N_w* = ḣ by a Savitzky–Golay derivative (quadratic, ``window_s`` wide)."""
+    """N_w* = ḣ by a Savitzky–Golay derivative (quadratic, ``window_s`` wide).
+
+    Missing samples (NaN: a telemetry dropout) are bridged by a straight line
+    between the samples either side, so across a dropout N_w* is the mean wheel
+    torque Δh/Δt over it: the torque that carries the propagated h from the last
+    tachometer reading to the next.  The first and last samples must be present."""
+    h_Nms = np.asarray(h_Nms, dtype=float)
+    missing = ~np.isfinite(h_Nms)
+    if missing.any():
+        k = np.arange(len(h_Nms))
+        h_Nms = np.interp(k, k[~missing], h_Nms[~missing])
     n = len(h_Nms)
     window = int(round(window_s / dt_s)) | 1  # odd
     if n < 5:
@@ -46,10 +56,66 @@ def wheel_torque(h_Nms: np.ndarray, dt_s: float, window_s: float = 20.0) -> np.n
                          delta=dt_s, mode="interp")
 
 
+MIN_WINDOWS = 100  # bridges of a length measured on the file, for its mean square
+
+
+def _bridge_q(h: np.ndarray, steps: int, dt_s: float, var_h: float) -> float | None:
+    """q_w ((N m)² s) of a random walk whose Brownian bridge over ``steps`` samples
+    matches the file: the mean square of h at the bridge's middle less the straight
+    line between its ends, over every such window with all three samples present,
+    less the tachometer noise in those three.  None if there are too few windows."""
+    m = steps // 2
+    w = m / steps
+    a, mid, b = h[:-steps], h[m:len(h) - steps + m], h[steps:]
+    d = mid - ((1.0 - w) * a + w * b)
+    d = d[np.isfinite(d)]
+    if d.size < MIN_WINDOWS:
+        return None
+    excess = float(np.mean(d * d)) - var_h * (1.0 + (1.0 - w) ** 2 + w**2)
+    return max(excess, 0.0) / (steps * dt_s * w * (1.0 - w))
+
+
+def dropout_wheel_noise(h_Nms: np.ndarray, dt_s: float, var_h: float) -> np.ndarray | None:
+    """Per-step wheel-torque noise q_w for the steps a dropout bridges, or None if
+    every tachometer sample is present.
+
+    Across a dropout N_w* is the mean torque Δh/Δt (``wheel_torque``); the true
+    torque wanders about it (the control works the wheels at the nutation period).
+    Its effect is modelled as the paper's wheel-torque noise q_w on the bridged
+    steps, sized from the telemetry itself: for a bridge of L steps, q_w is the one
+    whose Brownian bridge has the variance that straight-line bridges of L steps
+    leave at their middle, measured wherever the file has the three samples
+    (``_bridge_q``; lengths with too few windows take the longest measured one's q,
+    a random walk's extrapolation).  The filtered σ_h then grows over the dropout
+    as q_w·t, which covers the bridge's error (q_w·t·(1 − t/T) at time t of T)."""
+    h = np.asarray(h_Nms, dtype=float)
+    missing = ~np.isfinite(h)
+    if not missing.any():
+        return None
+    edges = np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
+    starts, ends = edges[::2] - 1, edges[1::2]  # last present before, first after
+    lengths = ends - starts
+    per_step = np.zeros(len(h))
+    q_of: dict[int, float] = {}
+    fallback = None
+    for steps in sorted(set(lengths.tolist())):
+        q = _bridge_q(h, steps, dt_s, var_h)
+        if q is None:
+            q = fallback if fallback is not None else 0.0
+        else:
+            fallback = q
+        q_of[steps] = q
+    for a, b in zip(starts, ends, strict=True):
+        per_step[a:b] = q_of[int(b - a)]
+    return per_step
+
+
 @dataclass(frozen=True)
 class FilterInputs:
     measurements: Measurements
     u: np.ndarray          # (N, 9), Eq. 12a; its h column is the modelled N_w*
+    # q_w ((N m)² s) on each step a telemetry dropout bridges, zero elsewhere; or None
+    wheel_noise: np.ndarray | None = None
 
 
 def prepare(params: ModelParams, dt_s: float, roll_rad, yaw_rad, wheel_speeds_radps,
@@ -62,9 +128,11 @@ def prepare(params: ModelParams, dt_s: float, roll_rad, yaw_rad, wheel_speeds_ra
     k = np.asarray(yaw_factors, dtype=float)
     if speeds.ndim != 2 or speeds.shape != (len(roll), len(k)):
         raise ValueError(f"wheel speeds must be (N, {len(k)}) for N = {len(roll)} samples")
-    if not (np.all(np.isfinite(roll)) and np.all(np.isfinite(speeds))):
-        raise ValueError("roll and wheel speeds must be present at every sample")
+    # A missing roll or wheel speed (NaN: a dropout) means no update at that sample;
+    # h needs every wheel.  The ends must be present to bridge the wheel torque.
     h = yaw_momentum(speeds, k)
+    if not (np.isfinite(h[0]) and np.isfinite(h[-1])):
+        raise ValueError("the wheel speeds of the first and last samples must be present")
     if yaw_sigma_rad is None:  # a file without per-sample σ: the Sun sensor's spec
         var_yaw = yaw_variance(sensors)
     else:
@@ -73,4 +141,4 @@ def prepare(params: ModelParams, dt_s: float, roll_rad, yaw_rad, wheel_speeds_ra
                         float(np.sum(k**2)) * tach_variance(sensors))
     nw = wheel_torque(h, dt_s, nw_window_s)
     u = input_vector(params, Nx_model_Nm, Nz_model_Nm, nw) * np.ones((len(roll), 1))
-    return FilterInputs(meas, u)
+    return FilterInputs(meas, u, dropout_wheel_noise(h, dt_s, float(meas.var_h)))

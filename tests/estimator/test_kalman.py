@@ -16,7 +16,15 @@ import pytest
 import scipy.linalg as sl
 
 from estimator.consistency import chi2_bounds, fraction_inside, nees, nis
-from estimator.kalman import Measurements, dense_filter, kalman_filter, pack, rts_smoother, unpack
+from estimator.kalman import (
+    ExtraNoise,
+    Measurements,
+    dense_filter,
+    kalman_filter,
+    pack,
+    rts_smoother,
+    unpack,
+)
 from estimator.model import (
     H_WHEEL,
     N_STATES,
@@ -336,3 +344,46 @@ def test_smoother_matches_a_dense_rts_reference(rng):
     assert est_dev(sm.x, xs, Ps).max() < 1e-9
     one = rts_smoother(kalman_filter(meas(z[:1, 0]), DISC, np.zeros(N_STATES), P0), DISC)
     assert one.x.shape == (1, N_STATES)
+
+
+def test_extra_noise_on_chosen_steps_matches_the_dense_references(rng):
+    """``ExtraNoise`` (the dropout wheel-torque noise) adds scale_k · Q_unit to the
+    propagation of the steps chosen: filter and smoother against numpy written out,
+    with the unit Q_d from expm/Van Loan for q_w = 1 alone.  Zero scale everywhere
+    must be the filter without it, bit for bit (the identity is the requirement: a
+    run without dropouts may not change)."""
+    n = 1500
+    _, z = simulate_linear(n, 1, rng, yaw_hours=0.2)
+    z = z[:, 0]
+    z[400:700] = np.nan                          # a 150 s dropout: no roll, yaw or h
+    unit = expm_discretization(q=ProcessNoise(q_x=0.0, q_z=0.0, q_w=1.0)).Qd
+    scale = np.zeros(n)
+    scale[399:700] = 3e-9                        # the steps that bridge it
+    extra = ExtraNoise(scale, unit)
+    res = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, extra=extra)
+    x_ref, P_ref = dense_filter(meas(z), DISC, np.zeros(N_STATES), P0, extra=extra)
+    # As the dense comparison above: the same algorithm, other rounding.
+    assert cov_dev(res.P, P_ref).max() < 1e-9
+    assert est_dev(res.x, x_ref, P_ref).max() < 1e-9
+    plain = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0)
+    # The noise is there: σ_h² at the end of the dropout grows by Σ scale · Q_unit,hh
+    # (4.6e-7 (N m s)²; the coupling to ẏ changes it by under 5%).
+    grown = res.sigma[699, H_WHEEL] ** 2 - plain.sigma[699, H_WHEEL] ** 2
+    assert grown == pytest.approx(scale.sum() * unit[H_WHEEL, H_WHEEL], rel=0.05)
+    zero = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0,
+                         extra=ExtraNoise(np.zeros(n), unit))
+    assert np.array_equal(zero.x, plain.x) and np.array_equal(zero.P_packed, plain.P_packed)
+
+    sm = rts_smoother(res, DISC, extra=extra)
+    x, P = res.x, res.P
+    xs, Ps = x.copy(), P.copy()
+    for k in range(n - 2, -1, -1):
+        Pp = DISC.Phi @ P[k] @ DISC.Phi.T + DISC.Qd + scale[k] * unit
+        C = P[k] @ DISC.Phi.T @ np.linalg.inv(Pp)
+        xs[k] = x[k] + C @ (xs[k + 1] - DISC.Phi @ x[k])
+        Ps[k] = P[k] + C @ (Ps[k + 1] - Pp) @ C.T
+    assert cov_dev(sm.P, Ps).max() < 1e-9
+    assert est_dev(sm.x, xs, Ps).max() < 1e-9
+    with pytest.raises(ValueError, match="extra noise"):
+        kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0,
+                      extra=ExtraNoise(-scale, unit))
