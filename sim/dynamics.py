@@ -1,4 +1,4 @@
-"""Symbolic gyrostat dynamics and attitude kinematics (CasADi SX), DESIGN.md section 4.
+"""Symbolic gyrostat dynamics and attitude kinematics (CasADi SX), docs/conventions.md.
 
 Two forms of the same Euler equation are provided, because the wheels can be
 driven two ways:
@@ -91,7 +91,7 @@ def dcm_from_euler312(yaw, roll, pitch):
 
 def rot_about_y(angle):
     """Active rotation by +angle about y: how an inertially fixed vector moves in the
-    orbit frame, which itself turns at −ω0 about y_R (DESIGN.md section 3)."""
+    orbit frame, which itself turns at −ω0 about y_R (docs/conventions.md)."""
     return rot_about_y_cs(ca.cos(angle), ca.sin(angle))
 
 

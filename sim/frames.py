@@ -1,6 +1,6 @@
-"""Attitude parameterisations and the orbit reference frame (DESIGN.md section 3).
+"""Attitude parameterisations and the orbit reference frame (docs/conventions.md).
 
-Conventions, pinned by DESIGN.md and relied on by the tests:
+Conventions, pinned by docs/conventions.md and relied on by the tests:
 
 * Rotation matrices are *frame* rotations (passive): ``C_BR`` maps a vector's
   reference-frame components into body-frame components, ``v_B = C_BR @ v_R``.
@@ -53,14 +53,14 @@ def rot3(angle) -> np.ndarray:
 
 
 def dcm_from_euler312(yaw, roll, pitch) -> np.ndarray:
-    """``C_BR = R2(pitch) R1(roll) R3(yaw)`` (DESIGN.md section 3)."""
+    """``C_BR = R2(pitch) R1(roll) R3(yaw)`` (docs/conventions.md)."""
     return rot2(pitch) @ rot1(roll) @ rot3(yaw)
 
 
 def euler312_from_dcm(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return ``(yaw, roll, pitch)`` in rad from ``C_BR``.
 
-    The angles are DESIGN.md's: φ = asin(C[1,2]), ψ = atan2(−C[1,0], C[1,1]),
+    The angles are docs/conventions.md's: φ = asin(C[1,2]), ψ = atan2(−C[1,0], C[1,1]),
     θ = atan2(−C[0,2], C[2,2]).  They are *computed* more stably: ψ from row 1,
     then ``M = C R3(ψ)ᵀ = R2(θ) R1(φ)``, whose entries give φ = atan2(M[1,2], M[1,1])
     and θ = atan2(M[2,0], M[0,0]) without the asin's loss of precision near
@@ -157,7 +157,7 @@ def orbit_frame_dcm(r: np.ndarray, v: np.ndarray) -> np.ndarray:
     """``C_RN`` whose rows are the reference-frame axes in inertial components.
 
     z_R = −r̂ (nadir), y_R = −(r×v)/|r×v| (negative orbit normal),
-    x_R = y_R × z_R (roughly along the velocity), DESIGN.md section 3.
+    x_R = y_R × z_R (roughly along the velocity), docs/conventions.md.
     """
     r = np.asarray(r, dtype=float)
     v = np.asarray(v, dtype=float)

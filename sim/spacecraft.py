@@ -1,7 +1,7 @@
 """Spacecraft mass properties and wheel configurations (paper Sections 2 and 2.3).
 
 ``inertia_kgm2`` is the inertia *tensor* of the whole spacecraft with its wheels
-locked (DESIGN.md section 4): off-diagonal entries are tensor elements, i.e. the
+locked (docs/conventions.md): off-diagonal entries are tensor elements, i.e. the
 negatives of the products of inertia.  Wheel speeds are relative to the body.
 """
 
@@ -117,7 +117,7 @@ class Spacecraft:
 
 
 def canted_axes(cant_deg: float) -> tuple[tuple[float, float, float], ...]:
-    """The two momentum-wheel axes of DESIGN.md section 3, canted ±cant from −y."""
+    """The two momentum-wheel axes of docs/conventions.md, canted ±cant from −y."""
     if not (np.isfinite(cant_deg) and 0.0 <= cant_deg < 90.0):
         raise ValueError("wheel cant must be in [0, 90) deg")
     c, s = np.cos(np.deg2rad(cant_deg)), np.sin(np.deg2rad(cant_deg))

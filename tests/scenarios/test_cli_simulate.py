@@ -1,5 +1,5 @@
 """`dynprop simulate`, `scenarios` and `plot` end to end through ``scenarios.cli.main``
-(DESIGN.md section 6: CLI, exit codes, run directory, truth.csv and telemetry.csv)."""
+(docs/outputs.md: CLI, exit codes, run directory, truth.csv and telemetry.csv)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Run directories are written whole or not at all (DESIGN.md section 6)."""
+"""Run directories are written whole or not at all (docs/outputs.md)."""
 
 import pytest
 

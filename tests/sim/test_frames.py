@@ -1,6 +1,6 @@
 """Tests for sim.frames against independent references written here in plain numpy.
 
-References (DESIGN.md section 3 conventions):
+References (docs/conventions.md conventions):
 
 * Frame (passive) rotations ``R1, R2, R3`` written out element by element below.
 * Attitude ``C_BR = R2(pitch) R1(roll) R3(yaw)`` (3-1-2: yaw, roll, pitch).
