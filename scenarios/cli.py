@@ -1,4 +1,4 @@
-"""The ``dynprop`` command line (DESIGN.md section 6).
+"""The ``dynprop`` command line (docs/outputs.md).
 
 Exit status: 0 on success, 2 for bad input (one line per problem, each naming the
 key, column or argument; no traceback, no directory written), 1 for an internal error (one line;
@@ -93,9 +93,13 @@ def _build_parser() -> argparse.ArgumentParser:
     mc.add_argument("--retry-failed", action="store_true", help="rerun cases that failed")
     mc.add_argument("--force", action="store_true",
                     help="replace an --out that holds something else")
-    est = sub.add_parser("estimate", help="the filter and smoother alone on a telemetry file")
+    est = sub.add_parser("estimate", help="the filter and smoother on a telemetry file "
+                         "(dropouts and other cadences on the filter step allowed): "
+                         "estimate.csv, smoothed.csv, summary.json, plots/")
     est.add_argument("telemetry", type=Path, metavar="TELEMETRY.csv")
     est.add_argument("--scenario", required=True, help="scenario (e.g. the run's scenario.yaml)")
+    est.add_argument("--truth", type=Path, metavar="TRUTH.csv",
+                     help="a truth.csv: also compute the errors, NEES and run's summary")
     est.add_argument("--out", required=True, type=Path, help="new output directory")
     est.add_argument("--force", action="store_true")
     sub.add_parser("scenarios", help="list the bundled scenarios")
@@ -170,14 +174,32 @@ def _cmd_run(args) -> int:
 def _cmd_estimate(args) -> int:
     from .loader import load_scenario
     from .rundir import check_out_dir, staged_run_dir
-    from .runs import estimate_to_directory, read_telemetry
+    from .runs import estimate_inputs, estimate_to_directory
 
     scenario = load_scenario(args.scenario)
     check_out_dir(args.out, args.force)
-    cols = read_telemetry(args.telemetry, scenario)
+    start = time.perf_counter()
+    grid, truth = estimate_inputs(scenario, args.telemetry, args.truth)
+    sources = {"file": str(args.telemetry),
+               "truth_file": None if args.truth is None else str(args.truth)}
     with staged_run_dir(args.out, force=args.force) as stage:
-        estimate_to_directory(scenario, cols, stage)
-    print(f"wrote {args.out}/estimate.csv")
+        summary = estimate_to_directory(scenario, grid, truth, stage, sources)
+        written = sorted(p.relative_to(stage) for p in stage.rglob("*") if p.is_file())
+    tel = summary["telemetry"]
+    print(f"{scenario.name}: filtered {tel['rows']} telemetry rows on {tel['filter_steps']} "
+          f"steps of {scenario.sample_interval_s:g} s ({tel['missing_steps']} without a row, "
+          f"{tel['dropouts']} dropouts, longest {tel['longest_dropout_s']:g} s) in "
+          f"{time.perf_counter() - start:.1f} s")
+    sig = ", ".join(f"{e:.4f}" for e in summary["yaw_sigma_at_gap_end_deg"]) or "none"
+    if summary["yaw_error_rms_deg"] is None:
+        print(f"filter yaw sigma at Sun-gap ends {sig} deg (Eq. 55: "
+              f"{summary['analytic_sigma_yaw_deg']:.4f}); no --truth, so no errors")
+    else:
+        ends = ", ".join(f"{e:+.4f}" for e in summary["yaw_error_at_gap_end_deg"]) or "none"
+        print(f"yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; at Sun-gap ends {ends} "
+              f"deg (filter sigma {sig}; Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f}); "
+              f"NEES mean {summary['nees_mean']:.2f} (expected {summary['nees_dof']})")
+    print(f"wrote {args.out}/: " + ", ".join(str(p) for p in written))
     return 0
 
 

@@ -1,4 +1,4 @@
-"""Column definitions of truth.csv and telemetry.csv (DESIGN.md section 6).
+"""Column definitions of truth.csv and telemetry.csv (docs/outputs.md).
 
 Degrees and rpm appear only here, at the I/O boundary, with the unit in each
 column name.  Missing values are NaN and are written as empty fields.
@@ -10,8 +10,6 @@ import numpy as np
 
 RAD2DEG = 180.0 / np.pi
 RADPS2RPM = 60.0 / (2.0 * np.pi)
-
-TELEMETRY_REQUIRED = ("t_s", "roll_deg", "pitch_deg", "yaw_deg", "wheel1_rpm", "wheel2_rpm")
 
 
 def truth_columns(result, sun_visible: np.ndarray) -> dict[str, np.ndarray]:

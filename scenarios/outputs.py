@@ -19,6 +19,7 @@ from .schema import Scenario
 RAD2DEG = 180.0 / np.pi
 # Estimate columns: state name with its unit, and the factor from model units
 # (ṙ/ω_n and ẏ/ω_n are written as rates in deg/s).
+STATE_NAMES = ("roll", "roll_rate", "yaw", "yaw_rate", "h", "N_px", "N_pz", "N_cx", "N_cz")
 STATE_COLUMNS = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms",
                  "N_px_Nm", "N_pz_Nm", "N_cx_Nm", "N_cz_Nm")
 
@@ -49,12 +50,16 @@ def sun_gaps(yaw_present: np.ndarray, dt_s: float, min_hours: float) -> list[tup
 NEES_STRIDE = 10  # NEES on every 10th sample (5 s apart): plenty for means and figures
 
 
-def nees_series(runs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def nees_series(runs) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Sample indices and NEES of the real and linear runs, unpacking only the
-    covariances used."""
+    covariances used; None for a run that has no truth (``estimate`` without
+    ``--truth``) or no linear twin (``estimate``)."""
     idx = np.arange(0, len(runs.real.x), NEES_STRIDE)
-    real = nees(runs.real.x[idx], unpack(runs.real.P_packed[idx]), runs.truth_model[idx])
-    lin = nees(runs.linear.x[idx], unpack(runs.linear.P_packed[idx]), runs.twin_model[idx])
+    real = lin = None
+    if runs.truth_model is not None:
+        real = nees(runs.real.x[idx], unpack(runs.real.P_packed[idx]), runs.truth_model[idx])
+    if runs.linear is not None:
+        lin = nees(runs.linear.x[idx], unpack(runs.linear.P_packed[idx]), runs.twin_model[idx])
     return idx, real, lin
 
 
@@ -77,12 +82,32 @@ def eq55_sigma_yaw_deg(s: Scenario, params) -> float:
     return float(np.sqrt(approx_yaw_variance(q, params.H_Nms, params.omega0_radps))) * RAD2DEG
 
 
+def _per_state(values) -> dict[str, float]:
+    return {name: float(v) for name, v in zip(STATE_NAMES, values, strict=True)}
+
+
+def _nis_means(result) -> dict[str, float | None]:
+    return {m: _mean_or_none(nis(result.innovations[:, i], result.innovation_var[:, i]))
+            for i, m in enumerate(("roll", "yaw", "h"))}
+
+
+def _comparison(err, err_lin) -> dict:
+    return {name: {"rms_real": _rms(err[:, k]) * f, "rms_linear": _rms(err_lin[:, k]) * f,
+                   "rms_difference": _rms(err[:, k] - err_lin[:, k]) * f,
+                   "max_abs_difference": float(np.max(np.abs(err[:, k] - err_lin[:, k])) * f)}
+            for name, k, f in (("roll_deg", R, RAD2DEG), ("yaw_deg", Y, RAD2DEG),
+                               ("h_Nms", 4, 1.0))}
+
+
 def summarize(s: Scenario, runs, t_s, yaw_present, nees_data) -> dict:
-    """summary.json: the figures of the run (DESIGN.md section 6 keys included).
-    No wall-clock time: the same scenario and seed must give the same bytes."""
+    """summary.json: the figures of the run, every key documented in docs/outputs.md.
+    A figure that needs the truth (``estimate`` without ``--truth``) or the linear
+    twin (``estimate``) is null, so every summary has the same keys.  No wall-clock
+    time: the same scenario and seed must give the same bytes."""
     p = runs.params
-    err = runs.real.x - runs.truth_model
-    err_lin = runs.linear.x - runs.twin_model
+    truth, twin = runs.truth_model is not None, runs.linear is not None
+    err = runs.real.x - runs.truth_model if truth else None
+    err_lin = runs.linear.x - runs.twin_model if twin else None
     sig = runs.real.sigma
     dt = s.sample_interval_s
     gaps = sun_gaps(yaw_present, dt, s.estimator.sun_gap_min_h)
@@ -90,45 +115,44 @@ def summarize(s: Scenario, runs, t_s, yaw_present, nees_data) -> dict:
     eq55 = eq55_sigma_yaw_deg(s, p)
     _, n_real, n_lin = nees_data
     nees_b = chi2_bounds(N_STATES, 1)
-    nis_b = chi2_bounds(1, 1)
+
+    def when(ok, value):
+        return value() if ok else None
+
+    per_state = when(truth, lambda: _per_state(np.mean(
+        (err / np.maximum(sig, 1e-300))[::NEES_STRIDE] ** 2, axis=0)))
     summary = {
         "scenario": s.name, "seed": s.seed, "epoch_utc": s.epoch_utc,
         "duration_s": s.duration_s, "dynprop_version": __version__,
-        "backend": runs.real.backend,
-        "yaw_error_rms_deg": _rms(err[:, Y]) * RAD2DEG,
-        "nees_mean_per_state": [float(v) for v in np.mean(
-            (err / np.maximum(runs.real.sigma, 1e-300))[::NEES_STRIDE] ** 2, axis=0)],
-        "yaw_error_rms_linear_deg": _rms(err_lin[:, Y]) * RAD2DEG,
-        "roll_error_rms_deg": _rms(err[:, R]) * RAD2DEG,
-        "h_error_rms_Nms": _rms(err[:, 4]),
-        "yaw_error_rms_smoothed_deg": _rms(runs.smoothed.x[:, Y] - runs.truth_model[:, Y])
-        * RAD2DEG,
+        "backend": runs.real.backend, "linear_twin": twin, "truth": truth,
+        "yaw_error_rms_deg": when(truth, lambda: _rms(err[:, Y]) * RAD2DEG),
+        "nees_mean_per_state": per_state,
+        "yaw_error_rms_linear_deg": when(twin, lambda: _rms(err_lin[:, Y]) * RAD2DEG),
+        "roll_error_rms_deg": when(truth, lambda: _rms(err[:, R]) * RAD2DEG),
+        "h_error_rms_Nms": when(truth, lambda: _rms(err[:, 4])),
+        "yaw_error_rms_smoothed_deg": when(
+            truth and runs.smoothed is not None,
+            lambda: _rms(runs.smoothed.x[:, Y] - runs.truth_model[:, Y]) * RAD2DEG),
         "sun_gaps_h": [[a * dt / 3600, b * dt / 3600] for a, b in gaps],
-        "yaw_error_at_gap_end_deg": [float(err[b, Y] * RAD2DEG) for b in ends],
-        "yaw_error_linear_at_gap_end_deg": [float(err_lin[b, Y] * RAD2DEG) for b in ends],
+        "yaw_error_at_gap_end_deg": when(truth, lambda: [float(err[b, Y] * RAD2DEG)
+                                                          for b in ends]),
+        "yaw_error_linear_at_gap_end_deg": when(twin, lambda: [float(err_lin[b, Y] * RAD2DEG)
+                                                                for b in ends]),
         "yaw_sigma_at_gap_end_deg": [float(sig[b, Y] * RAD2DEG) for b in ends],
-        "yaw_within_3sigma_at_gap_ends": bool(all(abs(err[b, Y]) <= 3 * sig[b, Y]
-                                                  for b in ends)),
+        "yaw_within_3sigma_at_gap_ends": when(truth, lambda: bool(all(
+            abs(err[b, Y]) <= 3 * sig[b, Y] for b in ends))),
         "analytic_sigma_yaw_deg": eq55,
         "last_gap_end_sigma_over_eq55": (float(sig[ends[-1], Y] * RAD2DEG / eq55)
                                          if ends else None),
-        "nonlinear_vs_linear": {
-            name: {"rms_real": _rms(err[:, k]) * f, "rms_linear": _rms(err_lin[:, k]) * f,
-                   "rms_difference": _rms(err[:, k] - err_lin[:, k]) * f,
-                   "max_abs_difference": float(np.max(np.abs(err[:, k] - err_lin[:, k])) * f)}
-            for name, k, f in (("roll_deg", R, RAD2DEG), ("yaw_deg", Y, RAD2DEG),
-                               ("h_Nms", 4, 1.0))},
-        "nees_mean": float(np.mean(n_real)), "nees_mean_linear": float(np.mean(n_lin)),
+        "nonlinear_vs_linear": when(truth and twin, lambda: _comparison(err, err_lin)),
+        "nees_mean": when(truth, lambda: float(np.mean(n_real))),
+        "nees_mean_linear": when(twin, lambda: float(np.mean(n_lin))),
         "nees_dof": N_STATES, "nees_bounds_95_per_sample": nees_b,
-        "nees_fraction_inside_95": fraction_inside(n_real, nees_b),
-        "nees_fraction_inside_95_linear": fraction_inside(n_lin, nees_b),
-        "nis_mean": {m: _mean_or_none(nis(runs.real.innovations[:, i],
-                                          runs.real.innovation_var[:, i]))
-                     for i, m in enumerate(("roll", "yaw", "h"))},
-        "nis_mean_linear": {m: _mean_or_none(nis(runs.linear.innovations[:, i],
-                                                 runs.linear.innovation_var[:, i]))
-                            for i, m in enumerate(("roll", "yaw", "h"))},
-        "nis_bounds_95_per_sample": nis_b,
+        "nees_fraction_inside_95": when(truth, lambda: fraction_inside(n_real, nees_b)),
+        "nees_fraction_inside_95_linear": when(twin, lambda: fraction_inside(n_lin, nees_b)),
+        "nis_mean": _nis_means(runs.real),
+        "nis_mean_linear": when(twin, lambda: _nis_means(runs.linear)),
+        "nis_bounds_95_per_sample": chi2_bounds(1, 1),
     }
     return summary
 

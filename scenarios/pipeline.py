@@ -24,7 +24,13 @@ import casadi as ca
 import numpy as np
 
 from estimator import model as em
-from estimator.kalman import FilterResult, SmootherResult, kalman_filter, rts_smoother
+from estimator.kalman import (
+    ExtraNoise,
+    FilterResult,
+    SmootherResult,
+    kalman_filter,
+    rts_smoother,
+)
 from estimator.preprocess import prepare
 from estimator.transition import discretize
 from rollout.chunks import ChunkedRollout
@@ -158,9 +164,10 @@ def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
 
 
 def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
-                     sun_head=None, rows=None) -> tuple[FilterResult, np.ndarray]:
-    """Preprocess telemetry arrays and run the filter; returns the result and u
-    (the history only at ``rows`` if given)."""
+                     sun_head=None, rows=None) -> tuple[FilterResult, dict]:
+    """Preprocess telemetry arrays and run the filter; returns the result (the
+    history only at ``rows`` if given) and what the smoother needs besides it
+    (``rts_smoother(result, disc, **that)``: the inputs u and any dropout noise)."""
     e = s.estimator
     if yaw_sigma is not None and sun_head is not None:
         yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
@@ -168,10 +175,18 @@ def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=Non
                      build.estimator_sensor_specs(s), yaw_sigma, e.model_torques.roll_Nm,
                      e.model_torques.yaw_Nm, e.wheel_torque_window_s)
     x0, P0 = initial_prior(s, params)
-    return kalman_filter(inputs.measurements, disc, x0, P0, u=inputs.u, rows=rows), inputs.u
+    extra = None
+    if inputs.wheel_noise is not None:
+        unit = discretize(params, em.ProcessNoise(q_x=0.0, q_z=0.0, q_w=1.0),
+                          s.sample_interval_s).Qd
+        # The bridge's measured q_w is the whole wheel-torque uncertainty there; the
+        # filter's own q_w already carries part of it.
+        extra = ExtraNoise(np.maximum(inputs.wheel_noise - e.process_noise.q_w, 0.0), unit)
+    result = kalman_filter(inputs.measurements, disc, x0, P0, u=inputs.u, rows=rows,
+                           extra=extra)
+    return result, {"u": inputs.u, "extra": extra}
 
 
-REQUIRED_TELEMETRY = ("t_s", "roll_deg", "pitch_deg", "yaw_deg", "wheel1_rpm", "wheel2_rpm")
 FALLBACK_YAW_SIGMA_DEG = 1.0  # yaw σ for files without a yaw_sigma_deg column
 
 
@@ -277,7 +292,7 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
         measured = (tel.roll_rad, tel.yaw_rad, tel.wheel_speeds_radps, tel.yaw_sigma_rad, head)
     else:
         measured = telemetry_inputs(s, telemetry_columns)
-    real, u = filter_telemetry(s, params, disc, *measured, rows=rows)
+    real, smoother_args = filter_telemetry(s, params, disc, *measured, rows=rows)
     twin_model = twin_tel = linear = None
     if twin:
         twin_model, twin_tel, twin_params = linear_twin(truth_scenario, truth, run,
@@ -291,6 +306,6 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
         linear, _ = filter_telemetry(s, params, disc, twin_tel.roll_rad, twin_tel.yaw_rad,
                                      twin_tel.wheel_speeds_radps, twin_tel.yaw_sigma_rad,
                                      twin_head, rows=rows)
-    smoothed = rts_smoother(real, disc, u=u) if smooth else None
+    smoothed = rts_smoother(real, disc, **smoother_args) if smooth else None
     return TwoRuns(sim, twin_tel, params, truth_model, twin_model, real, linear, smoothed,
                    build.yaw_factors(s), None if rows is None else np.asarray(rows))

@@ -1,4 +1,4 @@
-"""Run directories of `dynprop run` and `dynprop estimate` (DESIGN.md section 6)."""
+"""Run directories of `dynprop run` and `dynprop estimate` (docs/outputs.md)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,7 @@ from estimator.transition import discretize
 
 from . import build
 from .comparison import comparison_arrays
-from .csvio import BackgroundWriter, read_csv, write_csv
-from .loader import cap_lines, closest
+from .csvio import BackgroundWriter, write_csv
 from .outputs import (
     estimate_columns,
     nees_series,
@@ -21,12 +20,13 @@ from .outputs import (
     write_summary,
 )
 from .pipeline import (
-    REQUIRED_TELEMETRY,
+    TwoRuns,
     filter_telemetry,
+    model_truth,
     run_scenario,
     telemetry_inputs,
+    truth_torques,
 )
-from .rundir import RunDirError
 from .runner import simulate, write_simulation
 from .schema import Scenario
 
@@ -97,69 +97,50 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background)
     return summary
 
 
-OPTIONAL_TELEMETRY = ("yaw_sigma_deg", "sun_head")
+def estimate_inputs(s: Scenario, path: Path, truth_path: Path | None = None):
+    """The telemetry on the filter's grid and the truth at its samples (or None),
+    every problem found reported before anything is written."""
+    from .telemetry_file import on_grid, read_telemetry
+    from .truth_file import read_truth
+
+    grid = on_grid(read_telemetry(path, s), s.sample_interval_s, s.estimator.max_gap_s, path)
+    truth = None if truth_path is None else read_truth(truth_path, s, grid.columns["t_s"])
+    return grid, truth
 
 
-def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
-    """A telemetry CSV with at least the contract columns.  Every problem found is
-    reported, one line each naming the column; a missing column names the file's
-    column it was most likely misspelt as."""
-    path = Path(path)
-    if not path.is_file():
-        raise RunDirError(f"{path}: no such telemetry file")
-    try:
-        cols = read_csv(path)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
-    n_wheels = len(build.yaw_factors(s))
-    required = (*REQUIRED_TELEMETRY,
-                *(f"wheel{i + 1}_rpm" for i in range(2, n_wheels)))
-    unused = [c for c in cols if c not in required and c not in OPTIONAL_TELEMETRY]
-    problems = []
-    for name in required:
-        if name in cols:
-            continue
-        # A file column that looks like the missing one is most likely it, misspelt:
-        # name the file's column and suggest the valid name, as for a scenario key.
-        typo = closest(name, unused)
-        problems.append(f"{path}: unknown column {typo}; did you mean '{name}'?" if typo
-                        else f"{path}: missing column {name}")
-    t = cols.get("t_s")
-    if t is not None and len(t) < 2:
-        problems.append(f"{path}: needs at least two samples")
-    for name in ("t_s", "roll_deg", *(f"wheel{i + 1}_rpm" for i in range(n_wheels))):
-        bad = ~np.isfinite(cols[name]) if name in cols else np.zeros(0, bool)
-        if bad.any():
-            problems.append(f"{path}: column {name} has a missing or non-numeric value in "
-                            f"row {int(np.argmax(bad)) + 2}")
-    present = np.isfinite(cols["yaw_deg"]) if "yaw_deg" in cols else None
-    if "yaw_sigma_deg" in cols and present is not None:
-        sig = cols["yaw_sigma_deg"][present]
-        if not np.all(np.isfinite(sig) & (sig > 0)):
-            problems.append(f"{path}: yaw_sigma_deg must be positive wherever yaw_deg is "
-                            "present")
-    if "sun_head" in cols:
-        head = cols["sun_head"][np.isfinite(cols["sun_head"])]
-        if not np.all(np.isin(head, (0.0, 1.0, 2.0))):
-            problems.append(f"{path}: sun_head must be 0 (dss), 1 (cass1) or 2 (cass2)")
-    if t is not None and len(t) >= 2 and np.all(np.isfinite(t)):
-        steps = np.diff(t)
-        off = ~np.isclose(steps, s.sample_interval_s, rtol=1e-6, atol=1e-6)
-        if off.any():
-            k = int(np.argmax(off))
-            problems.append(f"{path}: t_s must advance by the scenario's sample_interval_s "
-                            f"({s.sample_interval_s} s); row {k + 3} steps {steps[k]:g} s")
-    if problems:
-        raise RunDirError("\n".join(cap_lines(problems)))
-    return cols
+def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) -> dict:
+    """`dynprop estimate`: the filter and smoother on gridded telemetry
+    (``estimate_inputs``), written as a run directory (scenario.yaml, estimate.csv,
+    smoothed.csv, summary.json, comparison.npz, plots/) that `dynprop plot` redraws.
+    With the truth, the errors, NEES and the summary's error figures are those `run`
+    computes; there is no linear twin (it needs the simulation, not its files).
+    ``sources`` (the input files' names) goes into summary.json."""
+    from types import SimpleNamespace
 
+    from .loader import resolved_yaml
 
-def estimate_to_directory(s: Scenario, cols: dict[str, np.ndarray], stage: Path) -> None:
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
-    real, u = filter_telemetry(s, params, disc, *telemetry_inputs(s, cols))
+    real, smoother_args = filter_telemetry(s, params, disc, *telemetry_inputs(s, grid.columns))
+    smoothed = rts_smoother(real, disc, **smoother_args)
+    truth_model = None
+    if truth is not None:
+        tt = truth_torques(truth, s.estimator.model_torques, params.omega0_radps)
+        truth_model = model_truth(params, truth, tt)
+    runs = TwoRuns(None if truth is None else SimpleNamespace(truth=truth), None, params,
+                   truth_model, None, real, None, smoothed, build.yaw_factors(s))
+    t = grid.columns["t_s"]
+    (stage / "scenario.yaml").write_text(resolved_yaml(s))
     write_csv(stage / "estimate.csv",
-              estimate_columns(cols["t_s"], real.x, real.sigma, params.omega_n_radps))
-    smoothed = rts_smoother(real, disc, u=u)
+              estimate_columns(t, real.x, real.sigma, params.omega_n_radps))
     write_csv(stage / "smoothed.csv",
-              estimate_columns(cols["t_s"], smoothed.x, smoothed.sigma, params.omega_n_radps))
+              estimate_columns(t, smoothed.x, smoothed.sigma, params.omega_n_radps))
+    present = np.isfinite(grid.columns["yaw_deg"])
+    nees_data = nees_series(runs)
+    np.savez(stage / "comparison.npz", **comparison_arrays(runs, t, present, nees_data))
+    summary = summarize(s, runs, t, present, nees_data)
+    summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s)}
+    from .plotting import plot_run_figures
+    plot_run_figures(stage, grid.columns)
+    write_summary(stage / "summary.json", summary)
+    return summary

@@ -1,5 +1,5 @@
 """`dynprop run`, `estimate` and `plot` end to end through ``scenarios.cli.main``
-(DESIGN.md section 6: the run directory, summary.json, exit codes), plus the
+(docs/outputs.md: the run directory, summary.json, exit codes), plus the
 filter-consistency and real-versus-linear properties the run exists to show.
 
 Runs are kept short (10 min to 13 h) so the module takes well under a minute.
@@ -278,7 +278,11 @@ def test_summary_numbers_are_those_of_the_written_files(request, which):
                                                   rel=F32_REL + 1e-12)
     # (e/σ)² of a float32 e and σ: within 4·2⁻²⁴ of the exact ratio.
     per_state = np.mean((c["err_real"][rows] / c["sigma"][rows]) ** 2, axis=0)
-    assert s["nees_mean_per_state"] == pytest.approx(per_state.tolist(), rel=4 * F32_REL + 1e-12)
+    names = [c.removesuffix("_deg").removesuffix("_degps").removesuffix("_Nms")
+             .removesuffix("_Nm") for c in STATE_COLUMNS]
+    assert list(s["nees_mean_per_state"]) == names  # labelled, in the state order
+    assert list(s["nees_mean_per_state"].values()) == pytest.approx(per_state.tolist(),
+                                                                     rel=4 * F32_REL + 1e-12)
     lo, hi = s["nees_bounds_95_per_sample"]
     for key, series in (("nees_fraction_inside_95", c["nees_real"][rows]),
                         ("nees_fraction_inside_95_linear", c["nees_linear"][rows])):
@@ -397,12 +401,18 @@ def _set_cell(lines: list[str], row: int, name: str, value: str) -> str:
     return "".join(out)
 
 
-def _double_t_steps(lines: list[str]) -> str:
+def _scale_t(lines: list[str], factor: float) -> str:
     out = [lines[0]]
     for line in lines[1:]:
         fields = line.rstrip("\n").split(",")
-        fields[0] = repr(2 * float(fields[0]))
+        fields[0] = repr(factor * float(fields[0]))
         out.append(",".join(fields) + "\n")
+    return "".join(out)
+
+
+def _swap_rows(lines: list[str], row: int) -> str:
+    out = list(lines)
+    out[row], out[row + 1] = out[row + 1], out[row]
     return "".join(out)
 
 
@@ -415,9 +425,14 @@ BAD_TELEMETRY = {
     "no_wheel2_rpm": (lambda lines: _drop_column(lines, "wheel2_rpm"), "wheel2_rpm"),
     "roll_not_a_number": (lambda lines: _set_cell(lines, 5, "roll_deg", "abc"),
                           "not a numeric CSV"),
-    "roll_missing": (lambda lines: _set_cell(lines, 5, "roll_deg", ""), "roll_deg"),
+    "wheel_missing_in_the_first_row": (lambda lines: _set_cell(lines, 1, "wheel1_rpm", ""),
+                                       "first and the last row"),
     "t_s_missing": (lambda lines: _set_cell(lines, 7, "t_s", ""), "t_s"),
-    "t_s_wrong_step": (_double_t_steps, "sample_interval_s"),
+    # 0.768 s steps: every other row half a step off the filter's 0.512 s grid.
+    "t_s_off_the_grid": (lambda lines: _scale_t(lines, 1.5), "off the filter's grid"),
+    "t_s_not_increasing": (lambda lines: _swap_rows(lines, 9), "must increase"),
+    # 7813 steps (4000 s) between rows, on the grid but over estimator.max_gap_s (3600 s).
+    "dropout_too_long": (lambda lines: _scale_t(lines, 7813), "max_gap_s"),
     "one_row": (lambda lines: "".join(lines[:2]), "at least two"),
 }
 # These pass the CSV parse and so reach the failing line of read_telemetry.

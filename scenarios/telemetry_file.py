@@ -1,0 +1,160 @@
+"""A telemetry CSV, as a ground system delivers it, onto the filter's time grid.
+
+Real telemetry has dropouts, irregular time tags and other cadences; the paper's
+filter steps at the scenario's ``sample_interval_s`` (0.512 s).  Every row must
+fall on that grid, counted from the first row; a grid sample with no row gets
+no measurement update (NaN), so the filter propagates across it and its
+covariance grows.  A cadence that is a multiple of the step (1.024 s, 2.048 s)
+is the same thing: every other sample missing.  A dropout longer than
+``estimator.max_gap_s`` is rejected, naming the row where it starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import build
+from .csvio import read_csv
+from .loader import cap_lines, closest
+from .rundir import RunDirError
+from .schema import Scenario
+
+REQUIRED = ("t_s", "roll_deg", "yaw_deg", "wheel1_rpm", "wheel2_rpm")
+OPTIONAL = ("pitch_deg", "yaw_sigma_deg", "sun_head")
+# A time tag may sit this fraction of a step off the grid: 5 ms at 0.512 s.  The
+# filter takes the sample at the grid time; at the orbit rate (7.3e-5 rad/s) and
+# the nutation rates of a few 1e-4 rad/s, 5 ms moves the attitude by ~1e-6°,
+# far below the Earth sensor's 0.01° quantum.
+GRID_TOLERANCE = 0.01
+
+
+@dataclass(frozen=True)
+class GriddedTelemetry:
+    """Telemetry on the filter's grid: ``columns`` hold one value per grid sample
+    (NaN where no row fell), ``rows`` the file row each sample came from (−1 if
+    none)."""
+
+    columns: dict[str, np.ndarray]
+    rows: np.ndarray
+    n_rows: int
+
+    @property
+    def missing(self) -> np.ndarray:
+        return self.rows < 0
+
+    def stats(self, dt_s: float) -> dict:
+        """What summary.json says about the telemetry itself."""
+        missing = self.missing
+        edges = np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
+        lengths = (edges[1::2] - edges[::2]) * dt_s
+        steps = np.diff(self.columns["t_s"][~missing])
+        return {"rows": int(self.n_rows), "filter_steps": int(len(self.rows)),
+                "missing_steps": int(missing.sum()), "dropouts": int(len(lengths)),
+                "longest_dropout_s": float(lengths.max(initial=0.0)),
+                "median_cadence_s": float(np.median(steps)) if steps.size else None}
+
+
+def _problem_columns(path: Path, cols: dict, required: tuple[str, ...]) -> list[str]:
+    unused = [c for c in cols if c not in required and c not in OPTIONAL]
+    problems = []
+    for name in required:
+        if name in cols:
+            continue
+        # A file column that looks like the missing one is most likely it, misspelt:
+        # name the file's column and suggest the valid name, as for a scenario key.
+        typo = closest(name, unused)
+        problems.append(f"{path}: unknown column {typo}; did you mean '{name}'?" if typo
+                        else f"{path}: missing column {name}")
+    return problems
+
+
+def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
+    """A telemetry CSV's columns, checked.  Every problem is reported, one line
+    each naming the column (or the row); the time tags are checked by ``on_grid``."""
+    path = Path(path)
+    if not path.is_file():
+        raise RunDirError(f"{path}: no such telemetry file")
+    try:
+        cols = read_csv(path)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
+    n_wheels = len(build.yaw_factors(s))
+    wheels = tuple(f"wheel{i + 1}_rpm" for i in range(n_wheels))
+    required = (*REQUIRED, *wheels[2:])
+    problems = _problem_columns(path, cols, required)
+    t = cols.get("t_s")
+    if t is not None and len(t) < 2:
+        problems.append(f"{path}: needs at least two samples")
+    bad_t = ~np.isfinite(t) if t is not None else np.zeros(0, bool)
+    if bad_t.any():
+        problems.append(f"{path}: column t_s has a missing or non-numeric value in row "
+                        f"{int(np.argmax(bad_t)) + 2}")
+    for name in wheels:
+        ends = cols[name][[0, -1]] if name in cols and len(cols[name]) >= 2 else ()
+        if not np.all(np.isfinite(ends)):
+            problems.append(f"{path}: column {name} must have a value in the first and the "
+                            "last row (a dropout is bridged between readings)")
+    present = np.isfinite(cols["yaw_deg"]) if "yaw_deg" in cols else None
+    if "yaw_sigma_deg" in cols and present is not None:
+        sig = cols["yaw_sigma_deg"][present]
+        if not np.all(np.isfinite(sig) & (sig > 0)):
+            problems.append(f"{path}: yaw_sigma_deg must be positive wherever yaw_deg is "
+                            "present")
+    if "sun_head" in cols:
+        head = cols["sun_head"][np.isfinite(cols["sun_head"])]
+        if not np.all(np.isin(head, (0.0, 1.0, 2.0))):
+            problems.append(f"{path}: sun_head must be 0 (dss), 1 (cass1) or 2 (cass2)")
+    if problems:
+        raise RunDirError("\n".join(cap_lines(problems)))
+    return cols
+
+
+def on_grid(cols: dict[str, np.ndarray], dt_s: float, max_gap_s: float,
+            path: Path | str = "telemetry") -> GriddedTelemetry:
+    """The rows of ``cols`` placed on the grid t_0 + k·dt_s.
+
+    Rows must increase in time and sit on the grid (within GRID_TOLERANCE of a
+    step); a step between rows longer than ``max_gap_s`` is rejected.  Roll,
+    yaw and wheel values that are empty in a row are missing at that sample only.
+    With every sample present the columns are the file's own, bit for bit."""
+    t = np.asarray(cols["t_s"], dtype=float)
+    steps = np.diff(t)
+    problems = []
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0))
+        problems.append(f"{path}: t_s must increase; row {k + 3} ({t[k + 1]:g} s) does not "
+                        f"follow row {k + 2} ({t[k]:g} s)")
+    k_float = (t - t[0]) / dt_s
+    k = np.rint(k_float)
+    off = np.abs(k_float - k) > GRID_TOLERANCE
+    if off.any():
+        i = int(np.argmax(off))
+        problems.append(f"{path}: row {i + 2} (t_s = {t[i]:g}) is {(k_float[i] - k[i]) * dt_s:+.3g}"
+                        f" s off the filter's grid: time tags must be t_0 + k × the "
+                        f"scenario's sample_interval_s ({dt_s:g} s)")
+    long = steps > max_gap_s
+    if long.any():
+        i = int(np.argmax(long))
+        problems.append(f"{path}: a {steps[i]:g} s dropout after row {i + 2} (t_s = {t[i]:g})"
+                        f" is longer than estimator.max_gap_s ({max_gap_s:g} s)")
+    if problems:
+        raise RunDirError("\n".join(problems))
+    index = k.astype(np.int64)
+    n = int(index[-1]) + 1
+    if n == len(t):
+        # Every sample present: the file's values as they are (bit for bit).
+        return GriddedTelemetry(dict(cols), np.arange(n), len(t))
+    gridded = {"t_s": t[0] + np.arange(n) * dt_s}
+    for name, values in cols.items():
+        if name == "t_s":
+            continue
+        column = np.full(n, np.nan)
+        column[index] = values
+        gridded[name] = column
+    gridded["t_s"][index] = t  # rows keep their own tags (within tolerance of the grid)
+    rows = np.full(n, -1, dtype=np.int64)
+    rows[index] = np.arange(len(t))
+    return GriddedTelemetry(gridded, rows, len(t))

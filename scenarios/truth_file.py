@@ -1,0 +1,66 @@
+"""truth.csv read back into the filter's model coordinates, for `estimate --truth`.
+
+The file holds what the run's truth arrays hold, at 10 significant digits
+(``csvio``): attitude, ω_BN, wheel momentum h and every torque by source.  From
+those the model states are rebuilt exactly as `run` builds them from the arrays
+(``pipeline.truth_torques`` and ``model_truth``), so errors computed from the file
+agree with the run's to the file's precision (5e-10 relative).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from sim.frames import dcm_from_euler312
+
+from . import build
+from .csvio import read_csv
+from .pipeline import EXTERNAL
+from .rundir import RunDirError
+from .schema import Scenario
+
+DEG = np.pi / 180.0
+ATTITUDE = ("t_s", "yaw_deg", "roll_deg", "pitch_deg", "wx_radps", "wy_radps", "wz_radps",
+            "h_Nms")
+
+
+def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> SimpleNamespace:
+    """The truth at the filter's grid times ``t_grid`` (every one must have a row):
+    the arrays ``pipeline.truth_torques`` and ``model_truth`` read, and ``euler_rad``
+    (yaw, roll, pitch) for the figures."""
+    path = Path(path)
+    if not path.is_file():
+        raise RunDirError(f"{path}: no such truth file")
+    try:
+        cols = read_csv(path)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
+    torque_cols = [f"{src}_{a}_Nm" for src in EXTERNAL for a in "xyz"]
+    missing = [c for c in (*ATTITUDE, *torque_cols) if c not in cols]
+    if missing:
+        raise RunDirError("\n".join(f"{path}: missing column {c}" for c in missing))
+    dt = s.sample_interval_s
+    t = cols["t_s"]
+    # Truth rows are matched to grid samples by their step number: the file's t_s
+    # is written to 10 digits, so compare indices, not times.
+    k_truth = np.rint((t - t_grid[0]) / dt)
+    k_grid = np.rint((t_grid - t_grid[0]) / dt)
+    where = np.searchsorted(k_truth, k_grid)
+    where = np.minimum(where, len(t) - 1)
+    absent = k_truth[where] != k_grid
+    if absent.any():
+        raise RunDirError(f"{path}: no row at t_s = {t_grid[np.argmax(absent)]:g} s: the truth "
+                          "must cover every sample of the telemetry's grid")
+    at = {name: values[where] for name, values in cols.items()}
+    euler = np.column_stack([at["yaw_deg"], at["roll_deg"], at["pitch_deg"]]) * DEG
+    w_bn = np.column_stack([at["wx_radps"], at["wy_radps"], at["wz_radps"]])
+    # ω_BN = ω_BR + C_BR ω_RN, with the orbit frame turning at −ω0 about y_R.
+    c_br = dcm_from_euler312(euler[:, 0], euler[:, 1], euler[:, 2])
+    w_br = w_bn + build.orbit(s).rate_radps * c_br[:, :, 1]
+    torques = {src: np.column_stack([at[f"{src}_{a}_Nm"] for a in "xyz"]) for src in EXTERNAL}
+    return SimpleNamespace(t_s=t_grid, euler_rad=euler, yaw_rad=euler[:, 0],
+                           roll_rad=euler[:, 1], pitch_rad=euler[:, 2], w_br_radps=w_br,
+                           h_Nms=at["h_Nms"], torques=torques)
