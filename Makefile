@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.dynprop-installed
 DEMO_DIR ?= runs/demo-$(shell date -u +%Y%m%dT%H%M%SZ)
 
-.PHONY: test test-vm demo bench lint venv clean
+.PHONY: test test-vm demo bench lint docs venv clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -38,6 +38,10 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
+
+# docs/scenario-reference.md is generated from the schema; a test fails when it is stale.
+docs: $(STAMP)
+	$(BIN)/python -m scenarios.reference --out docs/scenario-reference.md
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -37,6 +37,11 @@ _Float = Annotated[float, Strict()]
 Vec3 = Annotated[tuple[_Float, _Float, _Float], Strict(False)]
 Matrix3 = Annotated[tuple[Vec3, Vec3, Vec3], Strict(False)]
 MAX_DURATION_S = 30 * 86400.0  # a truth day holds ~70 MB of arrays
+# The sampled control loop loses its damping for steps above about 2.2 s and diverges
+# by 2.5 s (one day from a 0.5 deg yaw offset: the attitude-rate transient still decays
+# at 2.4 s and grows 40-fold at 2.5 s).  The step is capped at two 0.512 s samples, a
+# factor of two inside that.
+MAX_SAMPLE_INTERVAL_S = 1.024
 
 
 class _Section(BaseModel):
@@ -51,7 +56,8 @@ class Wheels(_Section):
     cant_deg: float = Field(spacecraft.GOES_NEXT_CANT_DEG, ge=0, lt=90,
                             description="cant of each wheel axis from −y in the y–z plane (deg)")
     speed_rpm: float = Field(spacecraft.GOES_NEXT_WHEEL_SPEED_RPM,
-                             description="nominal speed of each wheel, relative to the body (rpm)")
+                             description="nominal speed of each wheel relative to the body; not "
+                             "zero, since a momentum-biased spacecraft needs wheel momentum (rpm)")
 
     @field_validator("speed_rpm")
     @classmethod
@@ -65,7 +71,8 @@ class YawWheel(_Section):
     """The backup yaw reaction wheel along +z (Section 2.3)."""
 
     spin_inertia_kgm2: float = Field(spacecraft.GOES_NEXT_YAW_WHEEL_INERTIA_KGM2, gt=0,
-                                     description="spin inertia (kg m²); its speed cancels h")
+                                     description="spin inertia; the wheel's speed cancels h "
+                                     "(kg m²)")
 
 
 class Spacecraft(_Section):
@@ -74,8 +81,9 @@ class Spacecraft(_Section):
         "plus the yaw reaction wheel")
     inertia_kgm2: Matrix3 = Field(
         spacecraft.GOES_NEXT_INERTIA_KGM2,
-        description="locked-wheel inertia tensor, body axes (kg m²); off-diagonals are "
-        "tensor elements (minus the products of inertia)")
+        description="locked-wheel inertia tensor in body axes: symmetric, positive definite "
+        "and within the triangle inequality; off-diagonals are tensor elements, that is minus "
+        "the products of inertia (kg m²)")
     wheels: Wheels = Field(default_factory=Wheels)
     yaw_wheel: YawWheel = Field(default_factory=YawWheel)
 
@@ -105,16 +113,18 @@ class GravityGradient(_Section):
 
 
 class Solar(_Section):
-    enabled: bool = Field(True, description="solar array/sail imbalance torque (off in eclipse)")
+    enabled: bool = Field(True, description="solar array/sail imbalance torque, zero in "
+                          "eclipse")
     untrimmed_torque_Nm: float = Field(_SOLAR.untrimmed_torque_Nm,
                                        description="imbalance κ with the tab at 0 (N m)")
     tab_effectiveness_Nm_per_deg: float = Field(_SOLAR.tab_effectiveness_Nm_per_deg,
                                                 description="dκ/d(tab) (N m/deg)")
     trim_tab_deg: float = Field(_SOLAR.trim_tab_deg,
-                                description="trim tab setting (deg); residual κ = "
-                                "untrimmed − effectiveness · tab (default 1e-6 N m)")
+                                description="trim tab setting; the residual κ = "
+                                "untrimmed − effectiveness · tab is 1e-6 N m by default (deg)")
     lever_axis: Vec3 = Field(_SOLAR.lever_axis,
-                             description="array-to-sail centre-of-pressure unit vector (body)")
+                             description="array-to-sail centre-of-pressure direction, a unit "
+                             "vector in body axes (-)")
 
     @field_validator("lever_axis")
     @classmethod
@@ -125,8 +135,8 @@ class Solar(_Section):
 
 
 class Magnetic(_Section):
-    enabled: bool = Field(True, description="residual and prescribed dipole torques "
-                          "(the torquers are control and keep working)")
+    enabled: bool = Field(True, description="residual and prescribed dipole torques; the "
+                          "torquers are control and keep working")
     residual_dipole_Am2: Vec3 = Field(_MAG.residual_dipole_Am2,
                                       description="body-fixed dipole (A m²)")
     profile_amplitude_Am2: Vec3 = Field(_MAG.profile_amplitude_Am2,
@@ -137,7 +147,8 @@ class Magnetic(_Section):
 
 
 class Ripple(_Section):
-    enabled: bool = Field(True, description="wheel torque ripple (random, per wheel)")
+    enabled: bool = Field(True, description="wheel torque ripple, random and independent "
+                         "per wheel")
     psd_Nm2_per_Hz: float = Field(_RIPPLE.psd_Nm2_per_Hz, ge=0,
                                   description="one-sided PSD G; step variance G/(2Δt) ((N m)²/Hz)")
 
@@ -162,7 +173,8 @@ class Control(_Section):
                                    description="k_r in ḣ = H(k_r φ + k_ṙ φ̇) + k_h h (1/s)")
     roll_rate_gain: float = Field(_CTRL.roll_rate_gain, description="k_ṙ (-)")
     yaw_momentum_gain_per_s: float = Field(_CTRL.yaw_momentum_gain_per_s, description="k_h (1/s)")
-    magnetic_unloading: bool = Field(True, description="torquers unload h (m = B×T/|B|²)")
+    magnetic_unloading: bool = Field(True, description="torquers unload h with the dipole "
+                                    "m = B×T/|B|²")
     unloading_gain_per_s: float = Field(_CTRL.unloading_gain_per_s, ge=0,
                                         description="k_m in T_z = −k_m h (1/s)")
     torquer_max_Am2: float = Field(_CTRL.torquer_max_Am2, ge=0,
@@ -185,7 +197,10 @@ class EarthSensor(_Section):
 
 
 class SunHead(_Section):
-    kind: Literal["dss", "cass"] = Field(description="digital or coarse analog")
+    """One Sun-sensor head.  Every key defaults to that head's own GOES-Next value
+    (from ``sim.sensors``), so setting one key of a head keeps its others."""
+
+    kind: Literal["dss", "cass"] = Field(description="'dss': digital; 'cass': coarse analog")
     boresight_hour_angle_deg: float = Field(
         description="Sun hour angle from local noon at which the Sun is on the boresight (deg)")
     fov_in_plane_deg: float = Field(gt=0, lt=90, description="half field of view in the "
@@ -293,23 +308,33 @@ class Estimator(_Section):
                                  "counts as a Sun gap in the summary (h)")
     dss_error_correlation_s: float = Field(
         600.0, gt=0, description="how long the DSS yaw error stays correlated: its "
-        "quantisation share of the yaw variance counts once per this time (s); measured "
+        "quantisation share of the yaw variance counts once per this time; measured "
         "autocorrelation 0.5 at 8.5 min, because the out-of-plane angle that sets yaw "
-        "moves slowly")
+        "moves slowly (s)")
+    max_gap_s: float = Field(
+        3600.0, gt=0, description="Longest telemetry dropout `dynprop estimate` propagates "
+        "across (samples missing from the filter's 0.512 s grid: no update, the covariance "
+        "grows); a longer one is rejected with the row where it starts.")
 
 
 class Scenario(_Section):
-    name: str = Field(min_length=1, description="short identifier (required)")
+    name: str = Field(min_length=1, description="short identifier of the scenario")
     description: str = Field("", description="one line shown by `dynprop scenarios`")
     dynprop_version: None = Field(None, description="written into resolved scenarios; "
                                   "ignored on input")
     seed: int = Field(20260320, ge=0, description="root of every random stream")
-    epoch_utc: str = Field("2026-03-20T12:00:00Z", description="ISO 8601 UTC start time; sets "
-                           "the Sun and so the season (1950–2049)")
-    duration_s: float = Field(172800.0, gt=0, le=MAX_DURATION_S, description="length (s)")
-    sample_interval_s: float = Field(0.512, gt=0, le=1.024, description="telemetry, "
-                                     "control and integration step; the sampled control "
-                                     "loop goes unstable above ~2.2 s (s)")
+    epoch_utc: str = Field("2026-03-20T12:00:00Z", description="ISO 8601 UTC start time in "
+                           "1950–2049, where the solar ephemeris holds 0.01°; sets the Sun and "
+                           "so the season")
+    duration_s: float = Field(172800.0, gt=0, le=MAX_DURATION_S,
+                              description="length of the run, at least one "
+                              f"sample_interval_s and at most {MAX_DURATION_S / 86400:g} "
+                              "days (s)")
+    sample_interval_s: float = Field(
+        0.512, gt=0, le=MAX_SAMPLE_INTERVAL_S, description="telemetry, control and "
+        f"integration step, at most {MAX_SAMPLE_INTERVAL_S:g} s: the sampled control loop "
+        "loses its damping above about 2.2 s and diverges by 2.5 s, and the cap keeps a "
+        "factor of two inside that (s)")
     spacecraft: Spacecraft = Field(default_factory=Spacecraft)
     orbit: Orbit = Field(default_factory=Orbit)
     initial_state: InitialState = Field(default_factory=InitialState)

@@ -44,9 +44,11 @@ class _Section(BaseModel):
 class Normal(_Section):
     """Gaussian: nominal + mean + sigma · N(0, 1), per component."""
 
-    distribution: Literal["normal"]
-    sigma: Param = Field(description="standard deviation (the key's unit)")
-    mean: Param = Field(0.0, description="offset of the mean from the nominal value")
+    distribution: Literal["normal"] = Field(description="the distribution's tag")
+    sigma: Param = Field(description="standard deviation, not negative (the key's unit; "
+                         "days for epoch_utc)")
+    mean: Param = Field(0.0, description="offset of the mean from the nominal value (the "
+                        "key's unit; days for epoch_utc)")
 
     @field_validator("sigma")
     @classmethod
@@ -59,9 +61,11 @@ class Normal(_Section):
 class Uniform(_Section):
     """Uniform: nominal + U(low, high), per component."""
 
-    distribution: Literal["uniform"]
-    low: Param = Field(description="lowest offset from the nominal value")
-    high: Param = Field(description="highest offset from the nominal value")
+    distribution: Literal["uniform"] = Field(description="the distribution's tag")
+    low: Param = Field(description="lowest offset from the nominal value (the key's unit; "
+                       "days for epoch_utc)")
+    high: Param = Field(description="highest offset from the nominal value, not below low "
+                        "(the key's unit; days for epoch_utc)")
 
     @model_validator(mode="after")
     def _check(self):
@@ -88,8 +92,8 @@ class MonteCarlo(_Section):
     converged_after_h: float = Field(6.0, ge=0, description="the ensemble NEES test counts "
                                      "from this time on (h)")
     linear_twin: bool = Field(False, description="also run the filter on the linear twin's "
-                              "telemetry in every case (the linearized errors; about 1.8× "
-                              "the time per case)")
+                              "telemetry in every case, for the linearized errors; about 1.8× "
+                              "the time per case")
 
 
 def parameter_shape(value) -> tuple[int, ...]:
