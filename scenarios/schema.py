@@ -313,8 +313,8 @@ class Estimator(_Section):
         "moves slowly (s)")
     max_gap_s: float = Field(
         3600.0, gt=0, description="Longest telemetry dropout `dynprop estimate` propagates "
-        "across (samples missing from the filter's 0.512 s grid: no update, the covariance "
-        "grows); a longer one is rejected with the row where it starts.")
+        "across (samples missing from its grid of sample_interval_s steps: no update, the "
+        "covariance grows); a longer one is rejected with the row where it starts.")
 
 
 class Scenario(_Section):
