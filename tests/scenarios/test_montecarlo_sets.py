@@ -522,6 +522,10 @@ def test_set_statistics_are_those_of_the_stored_cases(twin_set):
     assert list(summary["nees"]["per_state_mean_after_convergence"].values()) == \
         pytest.approx(per_state.tolist(), rel=1e-12)
     assert summary["nees"]["points_after_convergence"] == conv.sum()
+    b_lo, b_hi = summary["nees"]["per_state_bounds_95"]
+    assert summary["nees"]["per_state_test_95"] == {
+        name: "below" if v < b_lo else "above" if v > b_hi else "inside"
+        for name, v in zip(STATES, per_state, strict=True)}
     for name, k in (("roll_deg", 0), ("yaw_deg", YAW), ("h_Nms", 4)):
         r = summary["rms_after_convergence"][name]
         assert r["ensemble_rms"] == pytest.approx(

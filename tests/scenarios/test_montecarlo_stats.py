@@ -217,3 +217,70 @@ def test_no_successful_case_gives_a_summary_without_statistics(stat_nominal):
     assert fig == {}
 
 
+
+
+# --------------------------------------------------------------------------- per-state diagnosis
+
+# The issue's 6-case set: (e/σ)² per state, averaged over runs and time.
+SIX_CASES = {"roll_deg": 0.913, "roll_rate_degps": 0.315, "yaw_deg": 0.283,
+             "yaw_rate_degps": 0.200, "h_Nms": 1.031, "N_px_Nm": 0.0351, "N_pz_Nm": 0.0303,
+             "N_cx_Nm": 0.0425, "N_cz_Nm": 0.0608}
+
+
+def _groups(diagnosis: str) -> dict[str, set[str]]:
+    """The states the diagnosis lists below, inside and above the per-state bounds."""
+    tail = diagnosis.split("N = ")[1].split("): ", 1)[1].split("; the linear twin")[0]
+    out = {}
+    for part in tail.split(" — "):
+        where, _, names = part.partition(" ")
+        out[where] = set() if names == "none" else {x.rsplit(" ", 1)[0]
+                                                    for x in names.split(", ")}
+    return out
+
+
+@pytest.mark.parametrize("runs", [6, 50])
+def test_diagnosis_places_every_state_against_its_chi2_bounds(runs):
+    """Every state is listed, in the group its χ²(N)/N bounds put it in: with 6 runs
+    roll rate (0.32) and yaw (0.28) are inside [0.21, 2.4], with 50 below [0.64, 1.4]."""
+    from estimator.consistency import chi2_bounds
+    from scenarios.montecarlo.stats import diagnose, per_state_test
+    lo, hi = chi2_bounds(1, runs)
+    states = dict(SIX_CASES, N_cz_Nm=3.0)       # one state above, too
+    n = {"runs": runs, "points_after_convergence": 2500, "per_state_bounds_95": [lo, hi],
+         "per_state_mean_after_convergence": states,
+         "fraction_after_convergence": {"inside": 0.01, "below": 0.99, "above": 0.0}}
+    want = {w: {k for k, v in states.items() if (v < lo, lo <= v <= hi, v > hi)[i]}
+            for i, w in enumerate(("below", "inside", "above"))}
+    assert ({"yaw_deg", "roll_rate_degps"} <= want["inside"]) == (runs == 6)
+    assert ({"yaw_deg", "roll_rate_degps"} <= want["below"]) == (runs == 50)
+    test = per_state_test(n)
+    assert {w: {k for k, v in test.items() if v == w} for w in want} == want
+    d = diagnose(n)
+    assert _groups(d) == want, d
+    for k, v in states.items():
+        assert f"{k} {v:.2g}" in d
+    assert f"N = {runs}" in d and "below 1" not in d
+
+
+def test_ensemble_diagnosis_lists_all_states_below_the_bound(stat_nominal):
+    """Synthetic cases whose errors are 0.3 σ in four states, 1.5 σ in one and σ in
+    the rest: (e/σ)² ≈ 0.09, 2.25 and 1 against [0.87, 1.14] for 400 runs."""
+    scale = np.ones(9)
+    scale[[1, 2, 5, 8]] = 0.3
+    scale[4] = 1.5
+    records, load = synthetic_set(1.0)
+
+    def scaled(k):
+        a = dict(load(k))
+        a["err"] = (a["err"] * scale).astype(np.float32)
+        a["nees"] = np.sum((a["err"].astype(float) / a["sigma"]) ** 2, axis=1)
+        return a
+    summary, _ = ensemble(stat_nominal, records, scaled, M_OK + 5, "cmd")
+    n = summary["nees"]
+    expect = {STATES[i]: "below" for i in (1, 2, 5, 8)} | {STATES[4]: "above"}
+    assert n["per_state_test_95"] == {s: expect.get(s, "inside") for s in STATES}
+    g = _groups(n["diagnosis"])
+    assert g["below"] == {STATES[i] for i in (1, 2, 5, 8)}
+    assert g["above"] == {STATES[4]}
+    assert g["inside"] == {STATES[i] for i in (0, 3, 6, 7)}
+
