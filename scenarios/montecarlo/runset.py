@@ -11,7 +11,7 @@ import numpy as np
 
 from ..schema import Scenario
 from .execute import connect, default_workers, run_dask, run_local
-from .stats import ensemble
+from .stats import ensemble, quantile_label, runs_to_bound_quantile
 from .store import SetDirectory, atomic_write, npz_bytes
 
 FIGURES = ("mc_errors.png", "mc_nees.png", "mc_gap_yaw.png")
@@ -119,8 +119,23 @@ def one_line(summary: dict) -> str:
                      f"{100 * frac['inside']:.0f}% of the time (below "
                      f"{100 * frac['below']:.0f}%)")
     for g in summary["gap_end_yaw"]:
-        q = g["abs_quantile_deg"]
-        parts.append(f"yaw at gap {g['gap']} end: ensemble 1σ/3σ {q['1sigma']:.4f}/"
-                     f"{q['3sigma']:.4f} deg vs filter σ {g['predicted_sigma_deg']:.4f}")
+        parts.append(f"yaw at gap {g['gap']} end: {gap_quantiles(g)} vs filter σ "
+                     f"{g['predicted_sigma_deg']:.4f} deg")
     parts.append(f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg")
     return "; ".join(parts)
+
+
+def gap_quantiles(g: dict) -> str:
+    """The 68.3% and 99.7% quantiles of |e| at a gap end, named as quantiles (they are
+    not σ), with a note when the cases are too few to bound them (stats.quantile_interval)."""
+    q, level, ci = g["abs_quantile_deg"], g["abs_quantile_level"], g["abs_quantile_ci95_deg"]
+    keys = ("1sigma", "3sigma")
+    text = (f"{'/'.join(quantile_label(level[k]) for k in keys)} quantiles of |e| "
+            f"{'/'.join(f'{q[k]:.4f}' for k in keys)} deg")
+    open_ = [k for k in keys if ci[k][1] is None]
+    if open_:
+        need = " and ".join(f"≥ {runs_to_bound_quantile(level[k])}" for k in open_)
+        text += (f" (poorly determined from N = {g['n']} cases: a 95% upper bound on the "
+                 f"{' and '.join(quantile_label(level[k]) for k in open_)} quantile"
+                 f"{'s' if len(open_) > 1 else ''} needs {need} cases)")
+    return text

@@ -560,6 +560,12 @@ def test_set_statistics_are_those_of_the_stored_cases(twin_set):
             j = int(math.floor(h))
             q = srt[j] + (h - j) * (srt[min(j + 1, m - 1)] - srt[j])
             assert stat["abs_quantile_deg"][name] == pytest.approx(q, rel=1e-12), (key, name)
+            # Its distribution-free 95% interval: order statistics X_(r) ≤ ξ_p < X_(s)
+            # with Binomial(m, p) tails of at most 2.5% each; 3 cases leave it open above.
+            r = max((i for i in range(1, m + 1) if stats.binom.sf(i - 1, m, p) >= 0.975),
+                    default=0)
+            assert stat["abs_quantile_level"][name] == p
+            assert stat["abs_quantile_ci95_deg"][name] == [srt[r - 1] if r else 0.0, None]
         assert stat["predicted_sigma_deg"] == pytest.approx(
             math.sqrt(np.mean(sig_end**2)), rel=1e-12), key
         for j in (1, 2, 3):

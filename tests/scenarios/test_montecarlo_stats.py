@@ -284,3 +284,46 @@ def test_ensemble_diagnosis_lists_all_states_below_the_bound(stat_nominal):
     assert g["above"] == {STATES[4]}
     assert g["inside"] == {STATES[i] for i in (0, 3, 6, 7)}
 
+
+# --------------------------------------------------------------------------- gap-end quantiles
+
+
+def test_quantile_interval_covers_the_true_quantile():
+    """The order-statistic interval holds the true p-quantile of |N(0, 1)| at least
+    95% of the time (here 2000 sets of 40), and is open above exactly when the set is
+    smaller than ln(0.025)/ln(p)."""
+    from scenarios.montecarlo.stats import quantile_interval, runs_to_bound_quantile
+    rng = np.random.default_rng(7)
+    for p in (0.682689492, 0.954499736):
+        true = stats.norm.ppf((1 + p) / 2)
+        hits = opens = 0
+        for _ in range(2000):
+            lo, hi = quantile_interval(rng.standard_normal(40), p)
+            opens += hi is None
+            hits += lo <= true and (hi is None or true <= hi)
+        assert hits / 2000 >= 0.95 - binomial_tol(0.95, 2000), (p, hits)
+        assert opens == (2000 if 40 < runs_to_bound_quantile(p) else 0)
+    assert [runs_to_bound_quantile(p) for p in (0.682689492, 0.954499736, 0.997300204)] == \
+        [10, 80, 1365]
+    for n, p in ((9, 0.682689492), (10, 0.682689492), (1364, 0.997300204),
+                 (1365, 0.997300204)):
+        closed = quantile_interval(np.arange(1.0, n + 1), p)[1] is not None
+        assert closed == (n >= runs_to_bound_quantile(p)), (n, p)
+
+
+def test_one_line_calls_the_gap_quantiles_quantiles(stat_nominal):
+    """400 cases bound the 68.3% quantile of |e| but not the 99.7% one (1365 needed)."""
+    from scenarios.montecarlo.runset import one_line
+    summary, _ = _ensemble(stat_nominal, 1.0)
+    line = one_line(summary)
+    assert "3σ" not in line and "1σ/" not in line
+    for g in summary["gap_end_yaw"]:
+        q = g["abs_quantile_deg"]
+        assert (f"68.3%/99.7% quantiles of |e| {q['1sigma']:.4f}/{q['3sigma']:.4f} deg"
+                in line)
+        assert g["abs_quantile_ci95_deg"]["1sigma"][1] is not None
+        assert g["abs_quantile_ci95_deg"]["3sigma"][1] is None
+        assert (f"poorly determined from N = {g['n']} cases: a 95% upper bound on the "
+                "99.7% quantile needs ≥ 1365 cases") in line
+    assert "68.3% quantile needs" not in line
+
