@@ -116,38 +116,69 @@ def plot_ensemble_nees(d: dict, summary: dict, converged_h: float, caption: str)
     return fig
 
 
+def _jitter(n: int, width: float) -> np.ndarray:
+    """Deterministic spread within a column (golden-ratio sequence): the same set
+    draws the same figure, byte for byte."""
+    return ((np.arange(n) * 0.6180339887) % 1.0 - 0.5) * width
+
+
+def _quantile_text(g: dict) -> str:
+    """The 68.3% and 99.7% quantiles of |e|, named as quantiles; flagged when the
+    set is too small for them to have a 95% upper bound (montecarlo.json's
+    abs_quantile_ci95_deg, open above)."""
+    q, ci = g["abs_quantile_deg"], g.get("abs_quantile_ci95_deg", {})
+    level = g.get("abs_quantile_level", {"1sigma": 0.682689492, "3sigma": 0.997300204})
+    keys = ("1sigma", "3sigma")
+    text = (f"{' / '.join(f'{100 * level[k]:.1f}%' for k in keys)} quantiles of |e|:\n"
+            f"{' / '.join(f'{q[k]:.4f}°' for k in keys)}")
+    if any(ci.get(k, [0, 0])[1] is None for k in keys):
+        text += f"\n(poorly determined from N = {g['n']})"
+    return text
+
+
 def plot_gap_end_yaw(d: dict, summary: dict, caption: str):
-    """Histogram of the yaw error at the end of each Sun gap, with the ensemble's
-    1σ/2σ/3σ (|error| quantiles) against the filter's predicted σ × 1, 2, 3."""
+    """Strip plot of the yaw error at the end of each Sun gap in units of each case's
+    own filter σ: one column per gap end, one dot per case, with the ±1/2/3 levels a
+    consistent filter puts 68 / 95 / 99.7% of its cases inside.  A histogram of a
+    handful of cases says nothing a dot per case does not say better."""
     gaps = summary["gap_end_yaw"]
-    fig, axes = plt.subplots(1, max(1, len(gaps)), figsize=(6 * max(1, len(gaps)), 5.5),
-                             squeeze=False, constrained_layout=True)
-    for ax, g in zip(axes[0], gaps, strict=False):
+    fig, ax = plt.subplots(figsize=(max(7.0, 3.2 * len(gaps) + 3.0), 6.4),
+                           constrained_layout=True)
+    twin = any(f"gap{g['gap']}_yaw_error_linear_deg" in d for g in gaps)
+    off = 0.17 if twin else 0.0
+    extent, ticks = 3.0, []
+    for x, g in enumerate(gaps):
         j = g["gap"]
-        e = d[f"gap{j}_yaw_error_deg"]
-        sig = g["predicted_sigma_deg"]
-        span = max(3.3 * sig, float(np.max(np.abs(e))) * 1.05)
-        bins = np.histogram_bin_edges(e, bins=max(10, int(np.sqrt(e.size) * 2)))
-        ax.hist(e, bins=bins, color="C0", alpha=0.75, label=f"nonlinear truth (n = {g['n']})")
+        sig = np.asarray(d[f"gap{j}_yaw_sigma_deg"], dtype=float)
+        series = [("nonlinear truth", d[f"gap{j}_yaw_error_deg"], "C0", "o", -off)]
         if f"gap{j}_yaw_error_linear_deg" in d:
-            ax.hist(d[f"gap{j}_yaw_error_linear_deg"], bins=bins, histtype="step", color="C2",
-                    lw=1.3, label="linear twin")
-        for m, q in enumerate(g["abs_quantile_deg"].values(), start=1):
-            ax.axvline(q, color="C0", ls="-", lw=1.5 - 0.3 * m,
-                       label=f"ensemble {m}σ (|error| quantile): {q:.4f}°")
-            ax.axvline(-q, color="C0", ls="-", lw=1.5 - 0.3 * m)
-            ax.axvline(m * sig, color="C3", ls="--", lw=1.5 - 0.3 * m,
-                       label=f"filter {m}σ: {m * sig:.4f}°")
-            ax.axvline(-m * sig, color="C3", ls="--", lw=1.5 - 0.3 * m)
-        within = g["fraction_within"]
-        ax.set_title(f"gap {j}, ending at {g['end_h_median']:.1f} h\n"
-                     f"within filter 1σ/2σ/3σ: {100 * within['1sigma']:.0f}% / "
-                     f"{100 * within['2sigma']:.0f}% / {100 * within['3sigma']:.0f}% "
-                     "(Gaussian: 68 / 95 / 99.7)", fontsize=10)
-        ax.set_xlim(-span, span)
-        ax.set_xlabel("yaw error at the end of the Sun gap (deg)")
-        ax.set_ylabel("runs")
-        ax.legend(fontsize=7.5, loc="upper left")
-        ax.grid(True, alpha=0.25)
+            series.append(("linear twin", d[f"gap{j}_yaw_error_linear_deg"], "C2", "s", off))
+        for label, e, color, marker, dx in series:
+            z = np.asarray(e, dtype=float) / sig
+            extent = max(extent, float(np.max(np.abs(z))) if z.size else 0.0)
+            ax.scatter(x + dx + _jitter(z.size, 0.22 if twin else 0.4), z, s=22 if
+                       z.size <= 200 else 8, color=color, marker=marker,
+                       alpha=0.85 if z.size <= 200 else 0.4, edgecolor="none",
+                       label=f"{label}, e / σ of its own filter" if x == 0 else None)
+        w = g["fraction_within"]
+        within = " / ".join(f"{round(w[f'{k}sigma'] * g['n'])}" for k in (1, 2, 3))
+        ticks.append(f"gap {j} end, {g['end_h_median']:.1f} h\n"
+                     f"N = {g['n']}; within 1σ / 2σ / 3σ: {within}\n"
+                     f"(Gaussian: 68 / 95 / 99.7%)\nfilter σ {g['predicted_sigma_deg']:.4f}° "
+                     f"(RMS over cases)\n{_quantile_text(g)}")
+    for k, ls in ((1, "-"), (2, "--"), (3, ":")):
+        for sign in (1, -1):
+            ax.axhline(sign * k, color="C3", ls=ls, lw=1.0,
+                       label=f"±{k} filter σ" if sign > 0 else None)
+    ax.axhline(0, color="0.5", lw=0.6)
+    span = 1.1 * extent
+    ax.set_ylim(-span, span)
+    ax.set_xlim(-0.6, len(gaps) - 0.4)
+    ax.set_xticks(range(len(gaps)), ticks, fontsize=8.5)
+    ax.set_ylabel("yaw error at the end of the Sun gap / filter σ at that time")
+    ax.grid(True, axis="y", alpha=0.25)
+    ax.legend(fontsize=8, loc="upper right", framealpha=0.9)
+    ax.set_title("Yaw at the end of each Sun gap, one dot per case, in units of the "
+                 "filter's own σ", fontsize=10.5)
     _caption(fig, caption)
     return fig

@@ -327,3 +327,49 @@ def test_one_line_calls_the_gap_quantiles_quantiles(stat_nominal):
                 "99.7% quantile needs ≥ 1365 cases") in line
     assert "68.3% quantile needs" not in line
 
+
+# --------------------------------------------------------------------------- gap-end figure
+
+
+def test_gap_end_strip_plot_shows_every_case_on_a_fitted_axis(stat_nominal):
+    """One column per gap end, one dot per case at e/σ, every dot inside the axis,
+    the ±1/2/3 lines drawn, and the axis no wider than the data and the ±3 lines."""
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PathCollection
+
+    from plots.montecarlo import plot_gap_end_yaw
+    summary, fig = _ensemble(stat_nominal, 1.0)
+    fig["gap2_yaw_error_deg"] = fig["gap2_yaw_error_deg"].copy()
+    fig["gap2_yaw_error_deg"][5] = -5.0 * fig["gap2_yaw_sigma_deg"][5]    # one outlier
+    f = plot_gap_end_yaw(fig, summary, "caption")
+    ax = f.axes[0]
+    lo, hi = ax.get_ylim()
+    points = [c.get_offsets() for c in ax.collections if isinstance(c, PathCollection)]
+    assert len(points) == 2 * len(summary["gap_end_yaw"])      # truth and twin per gap
+    for g in summary["gap_end_yaw"]:
+        j = g["gap"]
+        for key, pts in ((f"gap{j}_yaw_error_deg", points[2 * (j - 1)]),
+                         (f"gap{j}_yaw_error_linear_deg", points[2 * (j - 1) + 1])):
+            z = fig[key] / fig[f"gap{j}_yaw_sigma_deg"]
+            assert np.allclose(np.sort(pts[:, 1]), np.sort(z), rtol=1e-12)
+            assert np.all(np.abs(pts[:, 0] - (j - 1)) < 0.5)  # its own column
+    ys = np.concatenate([p[:, 1] for p in points])
+    assert lo < ys.min() and ys.max() < hi
+    assert lo < -3 and hi > 3 and max(-lo, hi) <= 1.15 * max(3, np.abs(ys).max())
+    levels = sorted(round(line.get_ydata()[0], 12) for line in ax.lines
+                    if line.get_ydata()[0] != 0)
+    assert levels == [-3, -2, -1, 1, 2, 3]
+    assert "runs" not in ax.get_ylabel()
+    labels = [t.get_text() for t in ax.get_xticklabels()]
+    assert len(labels) == 2 and all("quantiles of |e|" in t for t in labels)
+    plt.close(f)
+    # Six cases: the axis fits the ±3 lines, not ten times the data.
+    from scenarios.montecarlo.stats import _gap_stats
+    six = {k: v[:6] for k, v in fig.items() if k.startswith("gap1_")}
+    g1 = {"gap": 1, "end_h_median": 9.1,
+          **_gap_stats(six["gap1_yaw_error_deg"], six["gap1_yaw_sigma_deg"])}
+    f = plot_gap_end_yaw(six, {"gap_end_yaw": [g1]}, "caption")
+    lo, hi = f.axes[0].get_ylim()
+    assert 3 < hi <= 3.5 and -3.5 <= lo < -3
+    assert "poorly determined from N = 6" in f.axes[0].get_xticklabels()[0].get_text()
+    plt.close(f)
