@@ -19,18 +19,10 @@ from ..schema import Scenario
 from .analysis import KINDS, run_budget, run_sweep, threshold_table
 from .coefficients import coefficient_section
 from .propagation import SWEEP_DEG, set_flags
+from .verdict import g, verdict
 
 FIGURES = ("coefficients.png", "divergence_time.png", "divergence_sweep.png", "budget.png",
            "estimation.png")
-
-
-def g(v, digits: int = 3) -> str:
-    """The one number format of the report's tables."""
-    if v is None:
-        return "—"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    return f"{v:.{digits}g}"
 
 
 def build_report(s: Scenario, command: str, progress=None) -> tuple[dict, dict]:
@@ -56,88 +48,6 @@ def build_report(s: Scenario, command: str, progress=None) -> tuple[dict, dict]:
 
 def _sweep_values(report, model: str, key: str, kind: str) -> list[float]:
     return [c["divergence"][model][key] for c in report["sweep"]["cases"] if c["kind"] == kind]
-
-
-def first_failure(report) -> dict[str, float | None]:
-    """Smallest δ per sweep at which the filter on nonlinear telemetry leaves 3σ at a
-    gap end while the linear twin does not."""
-    out = {}
-    for kind in KINDS:
-        out[kind] = None
-        for c in report["sweep"]["cases"]:
-            if c["kind"] == kind and not c["estimation"]["within_3sigma_at_gap_ends"]:
-                out[kind] = c["delta_deg"]
-                break
-    return out
-
-
-def verdict(report) -> str:
-    th = {(r["sweep"], r["axis"], r["threshold"]): r["delta_star_deg"]
-          for r in report["sweep"]["threshold_crossings"]}
-    coeff = report["coefficients"]
-    worst = max(coeff["rows"], key=lambda r: r["rel_eq7_vs_jacobian"])
-    eig = coeff["eigenfrequencies"]["eq11c"]
-    coeff_part = [
-        f"Eq. 11's coefficients differ from the exact Jacobian of the nonlinear model by at "
-        f"most {100 * worst['rel_eq7_vs_jacobian']:.2g}% ({worst['coefficient']}); Eq. 5 "
-        f"(I_x = I_z) causes most of that, while Eq. 6 (dropping ω0(I_y − I)) alone shifts the "
-        f"eigenfrequencies, by {100 * eig['rel_slow']:.2g}% (orbit mode) and "
-        f"{100 * eig['rel_fast']:.2g}% (nutation).",
-    ]
-    parts = []
-    a = th[("attitude", "yaw", "10% of filter sigma")]
-    r = th[("rate", "yaw", "10% of filter sigma")]
-    parts.append(
-        f"Propagated beside the nonlinear truth, Eq. 11's yaw error exceeds 10% of the filter's "
-        f"steady-state σ for initial errors above {_delta_text(a)} (attitude) and "
-        f"{_delta_text(r)} (rate, as a nutation cone); below that the first-order model "
-        f"is adequate, and its residual grows linearly with the error (coefficient errors), "
-        f"then quadratically.")
-    fail = first_failure(report)
-    if any(v is not None for v in fail.values()):
-        parts.append("The filter on nonlinear telemetry leaves its 3σ at a Sun-gap end from "
-                     + " and ".join(f"δ = {v:g}° ({k})" for k, v in fail.items()
-                                    if v is not None)
-                     + ", where the linear twin stays consistent: there the linearization, "
-                     "not the sensors, limits the estimate.")
-    else:
-        parts.append("The filter stays within 3σ at every Sun-gap end over the whole sweep.")
-    b = report["budget"]
-    if b:
-        col = b["columns"][0]
-        rows = [r for r in b["rows"] if r["in_scenario"]]
-        if rows:
-            dom = max(rows, key=lambda r: max(abs(r["contribution"][col]["torque_model_deg"]),
-                                              abs(r["contribution"][col]["dynamics_deg"])))
-            c = dom["contribution"][col]
-            size = max(abs(c["torque_model_deg"]), abs(c["dynamics_deg"]))
-            which = "torque model (Eq. 9)" if abs(c["torque_model_deg"]) > abs(
-                c["dynamics_deg"]) else "dynamics"
-            parts.append(
-                f"At the scenario's own state the dominant assumption is **{dom['label']}**, "
-                f"through the {which}: {g(size)}° "
-                f"of yaw at the Sun-gap end, of a total "
-                f"{g(abs(b['total'][col]['torque_model_deg']))}° (torque model) and "
-                f"{g(abs(b['total'][col]['dynamics_deg']))}° (dynamics) against a filter σ of "
-                f"{g(report['sweep']['thresholds']['yaw_sigma_deg'])}°.")
-        hyp = [r for r in b["rows"] if not r["in_scenario"]]
-        if hyp:
-            big = max(hyp, key=lambda r: abs(r["contribution"][col]["torque_model_deg"]))
-            parts.append(f"Of the effects this scenario does not have, {big['label']} would "
-                         f"matter most ({g(abs(big['contribution'][col]['torque_model_deg']))}°).")
-    # The dominant assumption first (budget), then error sizes, then the coefficients.
-    n_budget = 2 if b and any(not r["in_scenario"] for r in b["rows"]) else 1
-    if b:
-        parts = parts[-n_budget:] + parts[:-n_budget]
-    return " ".join(parts + coeff_part)
-
-
-def _delta_text(v) -> str:
-    if v is None:
-        return f"{SWEEP_DEG[-1]:g}° (never reached)"
-    if v == 0.0:
-        return f"{SWEEP_DEG[0]:g}° (already at the smallest)"
-    return f"{v:.2g}°"
 
 
 # --- Markdown -----------------------------------------------------------------------

@@ -242,6 +242,27 @@ def test_report_opens_with_a_verdict_naming_an_assumption(report_dir):
     head = md.split("## 1.")[0]
     assert "## Verdict" in head and rep["verdict"] in head
     assert "dominant assumption" in rep["verdict"]
+    # The budget's numbers keep their signs (report.json holds them signed).
+    b = rep["budget"]
+    col = b["columns"][0]
+
+    def signed(v):
+        return ("−" if v < 0 else "+") + f"{abs(v):.3g}" if v else "0"
+    rows = [r for r in b["rows"] if r["in_scenario"]]
+    models = ("torque_model_deg", "dynamics_deg")
+    dom = max(rows, key=lambda r: max(abs(r["contribution"][col][k]) for k in models))
+    c = dom["contribution"][col]
+    key = max(models, key=lambda k: abs(c[k]))
+    assert f"**{dom['label']}**" in rep["verdict"]
+    assert f"{signed(c[key])}° of yaw at the Sun-gap end" in rep["verdict"]
+    assert (f"totals {signed(b['total'][col]['torque_model_deg'])}° (torque model) and "
+            f"{signed(b['total'][col]['dynamics_deg'])}° (dynamics)") in rep["verdict"]
+
+    def cancels(k):   # the largest row beyond its total, or of the other sign
+        v = max((r["contribution"][col][k] for r in rows if r["key"] != "products_minus30"),
+                key=abs)
+        return v != 0 and (abs(v) > abs(b["total"][col][k]) or v * b["total"][col][k] < 0)
+    assert ("Terms cancel in the" in rep["verdict"]) == any(cancels(k) for k in models)
 
 
 def test_bad_scenario_exits_2_and_writes_nothing(tmp_path, capsys):
@@ -251,3 +272,79 @@ def test_bad_scenario_exits_2_and_writes_nothing(tmp_path, capsys):
     assert not out.exists()
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "duration_s" in err[0]
+
+
+# --- verdict and figures on numbers the test chooses ------------------------------------
+
+def _budget(rows, ideal, total):
+    """A budget dict as run_budget writes it, for one column: ``rows`` are
+    (key, label, in_scenario, torque_model_deg, dynamics_deg)."""
+    def c(tm, dyn):
+        return {"initial": {"torque_model_deg": tm, "dynamics_deg": dyn}}
+    out = {"columns": ["initial"], "ideal": c(*ideal), "total": c(*total),
+           "rows": [{"key": k, "label": lab, "in_scenario": flag, "contribution": c(tm, dyn)}
+                    for k, lab, flag, tm, dyn in rows]}
+    summed = [r for r in out["rows"] if r["in_scenario"] and r["key"] != "products_minus30"]
+    out["sum_in_scenario"] = {"initial": {
+        m: ideal[i] + sum(r["contribution"]["initial"][m] for r in summed)
+        for i, m in enumerate(("torque_model_deg", "dynamics_deg"))}}
+    return out
+
+
+# The issue's numbers: the magnetic row −0.0029°, the total −0.00244°, the eclipse
+# +0.000383° and the ideal's +8e-5° pulling the other way.
+CANCELLING = _budget([("magnetic_control", "magnetic", True, -0.0029, 7e-7),
+                      ("eclipse", "eclipse", True, 0.000383, 0.0),
+                      ("Iy", "Iy", True, -5.9e-5, -5.9e-5),
+                      ("untrimmed_solar", "untrimmed solar", False, 0.00385, -1.7e-4)],
+                     ideal=(8e-5, 2e-7), total=(-0.00244, -2.16e-5))
+
+
+def test_verdict_keeps_signs_and_says_terms_cancel():
+    from scenarios.linearization.verdict import budget_sentences
+    text = " ".join(budget_sentences(CANCELLING, 0.0445))
+    assert "**magnetic**, through the torque model (Eq. 9): −0.0029° of yaw" in text
+    assert "totals −0.00244° (torque model) and −2.16e-05° (dynamics)" in text
+    # |row| > |total|, same sign: the share cancelled, and by what (signed).
+    assert "in the torque model (Eq. 9): 16% of it is cancelled, mainly by eclipse " \
+           "(+0.000383°)" in text
+    # The dynamics too: Iy alone (−5.9e-5) exceeds the total (−2.16e-5).
+    assert "in the dynamics, Iy alone gives −5.9e-05° against a total of −2.16e-05°" in text
+    assert "untrimmed solar would matter most (+0.00385°)" in text
+    for number in re.findall(r"[+−]?\d[\d.]*(?:e-\d+)?°", text):  # every budget number signed
+        assert number[0] in "+−" or number == "0.0445°", (number, text)
+
+
+def test_verdict_says_when_the_total_has_the_other_sign():
+    from scenarios.linearization.verdict import budget_sentences
+    b = _budget([("magnetic_control", "magnetic", True, -0.0029, 0.0),
+                 ("eclipse", "eclipse", True, 0.004, 0.0)],
+                ideal=(0.0, 0.0), total=(0.0012, 0.0))
+    text = " ".join(budget_sentences(b, 0.04))
+    # The eclipse row is the largest; the total has its sign: cancelled by magnetic.
+    assert "**eclipse**" in text and "+0.004° of yaw" in text
+    assert "70% of it is cancelled, mainly by magnetic (−0.0029°)" in text
+    b = _budget([("magnetic_control", "magnetic", True, -0.0029, 0.0),
+                 ("eclipse", "eclipse", True, 0.0021, 0.0)],
+                ideal=(0.0, 0.0), total=(0.0004, 0.0))
+    text = " ".join(budget_sentences(b, 0.04))
+    assert "**magnetic**" in text and "totals +0.0004° (torque model)" in text
+    assert "more than cancelled: the total has the other sign, mainly by eclipse " \
+           "(+0.0021°)" in text
+    # Smaller than the total but of the other sign: the ideal's nonlinearity outweighs it.
+    b = _budget([("magnetic_control", "magnetic", True, -0.001, 0.0)],
+                ideal=(0.003, 0.0), total=(0.002, 0.0))
+    text = " ".join(budget_sentences(b, 0.04))
+    assert "totals +0.002° (torque model)" in text
+    assert "more than cancelled: the total has the other sign, mainly by the ideal " \
+           "configuration's own nonlinearity (+0.003°)" in text
+
+
+def test_verdict_is_silent_about_cancelling_when_nothing_cancels():
+    from scenarios.linearization.verdict import budget_sentences
+    b = _budget([("magnetic_control", "magnetic", True, -0.0029, -1e-5),
+                 ("eclipse", "eclipse", True, -0.0004, -1e-6)],
+                ideal=(-1e-5, -1e-7), total=(-0.00332, -1.12e-5))
+    text = " ".join(budget_sentences(b, 0.04))
+    assert "−0.0029° of yaw" in text and "totals −0.00332°" in text
+    assert "cancel" not in text
