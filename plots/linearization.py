@@ -3,7 +3,9 @@
 Each function takes plain numbers and arrays (no physics here) and returns a
 figure; ``caption`` (scenario, seed, reproducing command) is printed under
 every figure so that a figure lifted into a review still says where it came from.
-Quantities that span decades are on log axes.
+Quantities that span decades are on log axes; signed ones on a symmetric-log axis.
+A value a log axis cannot show (an exact zero, or one below the axis) is marked at
+the axis and labelled, never left out: a missing bar reads as a missing number.
 """
 
 from __future__ import annotations
@@ -25,19 +27,36 @@ def _pos(a) -> np.ndarray:
     return np.maximum(np.abs(np.asarray(a, dtype=float)), TINY)
 
 
-def plot_coefficients(names, series: dict[str, list[float]], caption: str):
+def _mark_off_axis(ax, y: float, v: float, floor: float, color) -> None:
+    """A value a log axis starting at ``floor`` cannot draw: a marker at the axis and
+    "0" (an exact zero) or the value itself (below the axis) beside it."""
+    text = "0" if v == 0 else f"{v:.1e}"
+    ax.plot(floor, y, marker="o" if v == 0 else "<", ms=6, mfc="white", mec=color,
+            mew=1.3, clip_on=False, zorder=4)
+    ax.annotate(text, (floor, y), xytext=(7, 0), textcoords="offset points", va="center",
+                fontsize=7.5, color=color)
+
+
+def plot_coefficients(names, series: dict[str, list[float]], caption: str,
+                      floor: float = 1e-7):
     """Relative difference of each coefficient from the Jacobian, one bar per
-    approximation (log scale)."""
+    approximation (log scale).  Exact zeros and values below ``floor`` are marked
+    at the axis, labelled "0" or with their value."""
     fig, ax = plt.subplots(figsize=(11, 6.2), constrained_layout=True)
     y = np.arange(len(names))
     height = 0.8 / len(series)
     for k, (label, vals) in enumerate(series.items()):
-        ax.barh(y + (k - (len(series) - 1) / 2) * height, _pos(vals), height, label=label)
+        v = np.abs(np.asarray(vals, dtype=float))
+        yk = y + (k - (len(series) - 1) / 2) * height
+        ax.barh(yk, np.where(v >= floor, v, np.nan), height, label=label, color=f"C{k}")
+        for yi, vi in zip(yk[v < floor], v[v < floor], strict=True):
+            _mark_off_axis(ax, yi, vi, floor, f"C{k}")
     ax.set_xscale("log")
     ax.set_yticks(y, names)
     ax.invert_yaxis()
-    ax.set_xlim(1e-7, 2.0)
-    ax.set_xlabel("|coefficient − Jacobian| / |Jacobian|")
+    ax.set_xlim(floor, 2.0)
+    ax.set_xlabel("|coefficient − Jacobian| / |Jacobian|  (○ 0: exact zero; "
+                  f"◁: below {floor:.0e}, value beside it)")
     ax.grid(True, axis="x", which="both", alpha=0.3)
     ax.legend(loc="lower right", fontsize=9)
     ax.set_title("Eqs. 3a–3c coefficients: each approximation against the CasADi Jacobian")
@@ -111,28 +130,60 @@ def plot_divergence_sweep(deltas, values: dict, levels: dict[str, float], captio
     return fig
 
 
+def _linthresh(values) -> float:
+    """The symmetric-log axis is linear within ± this: four decades under the largest
+    |value|, a power of ten, so every row of interest sits on the log part."""
+    big = float(np.max(np.abs(values))) if np.size(values) else 0.0
+    return 10.0 ** (np.floor(np.log10(big)) - 4) if big > 0 else 1e-8
+
+
 def plot_budget(labels, columns: dict[str, list[float]], total: dict[str, float],
-                in_scenario, caption: str):
-    """|Contribution| of each effect to the yaw error at the Sun-gap end (log scale)."""
-    fig, ax = plt.subplots(figsize=(11, 5.8), constrained_layout=True)
-    y = np.arange(len(labels))
-    height = 0.8 / len(columns)
-    for k, (label, vals) in enumerate(columns.items()):
-        ax.barh(y + (k - (len(columns) - 1) / 2) * height, _pos(vals), height,
-                label=label, color=f"C{k}")
-        if label in total:
-            ax.axvline(abs(total[label]) or TINY, color=f"C{k}", ls="--", lw=1,
-                       label=f"total, scenario as configured ({label})")
+                in_scenario, caption: str, ideal: dict[str, float] | None = None):
+    """Signed contribution of each effect to the yaw error at the Sun-gap end
+    (symmetric-log axis: left of 0 negative, right positive), with the scenario's
+    total (and the ideal configuration's own error) as rows of their own and the
+    totals as dashed lines, so that a row beyond its total's line, or on the other
+    side of 0, shows terms cancelling.  Exact zeros are marked "0"."""
+    extra = [("ideal configuration (nonlinearity alone)", ideal)] if ideal else []
+    extra += [("total: scenario as configured", total)]
     names = [f"{lab}{'' if flag else ' (not in scenario)'}"
-             for lab, flag in zip(labels, in_scenario, strict=True)]
+             for lab, flag in zip(labels, in_scenario, strict=True)] + [e[0] for e in extra]
+    rows = {c: list(v) + [e[1][c] for e in extra] for c, v in columns.items()}
+    every = np.concatenate([np.asarray(v, dtype=float) for v in rows.values()])
+    thresh = _linthresh(every)
+    fig, ax = plt.subplots(figsize=(12, 7.0), constrained_layout=True)
+    y = np.arange(len(names))
+    height = 0.8 / len(rows)
+    for k, (label, vals) in enumerate(rows.items()):
+        v = np.asarray(vals, dtype=float)
+        yk = y + (k - (len(rows) - 1) / 2) * height
+        bars = ax.barh(yk, v, height, label=label, color=f"C{k}")
+        for b in bars[len(labels):]:         # the total rows: hatched
+            b.set_hatch("///")
+            b.set_edgecolor("k")
+        for yi, vi in zip(yk, v, strict=True):
+            if vi == 0:
+                ax.plot(0, yi, marker="o", ms=6, mfc="white", mec=f"C{k}", mew=1.3, zorder=4)
+            ax.annotate("0" if vi == 0 else f"{vi:+.2g}".replace("-", "−"), (vi, yi),
+                        xytext=(4 if vi >= 0 else -4, 0), textcoords="offset points",
+                        ha="left" if vi >= 0 else "right", va="center", fontsize=7,
+                        color=f"C{k}")
+        if label in total:
+            ax.axvline(total[label], color=f"C{k}", ls="--", lw=1,
+                       label=f"total ({label}): {total[label]:+.3g}°".replace("-", "−"))
+    ax.axvline(0, color="k", lw=0.8)
+    ax.axhline(len(labels) - 0.5, color="0.5", lw=0.8)
+    ax.set_xscale("symlog", linthresh=thresh, linscale=0.5)
+    lim = 10 ** np.ceil(np.log10(max(float(np.max(np.abs(every))), thresh) * 1.5))
+    ax.set_xlim(-lim, lim)
     ax.set_yticks(y, names)
     ax.invert_yaxis()
-    ax.set_xscale("log")
-    ax.set_xlim(1e-8, None)
-    ax.grid(True, axis="x", which="both", alpha=0.3)
-    ax.set_xlabel("|yaw error of Eq. 11 at the Sun-gap end| contributed (deg)")
-    ax.legend(fontsize=8, loc="lower right")
-    ax.set_title("Error budget: each effect switched on alone in the ideal configuration")
+    ax.grid(True, axis="x", which="major", alpha=0.3)
+    ax.set_xlabel(f"signed yaw error of Eq. 11 at the Sun-gap end contributed (deg); "
+                  f"symmetric log, linear within ±{thresh:.0e}")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=4)
+    ax.set_title("Error budget: each effect switched on alone in the ideal configuration "
+                 "(← negative | positive →)")
     fig.get_layout_engine().set(rect=(0, 0.03, 1, 0.97))
     _caption(fig, caption)
     return fig

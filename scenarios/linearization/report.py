@@ -241,7 +241,9 @@ def draw_figures(out: Path, report: dict, arrays: dict) -> list[Path]:
              "dynamics": [r["contribution"][col]["dynamics_deg"] for r in b["rows"]]},
             {"torque model": b["total"][col]["torque_model_deg"],
              "dynamics": b["total"][col]["dynamics_deg"]},
-            [r["in_scenario"] for r in b["rows"]], cap)
+            [r["in_scenario"] for r in b["rows"]], cap,
+            ideal={"torque model": b["ideal"][col]["torque_model_deg"],
+                   "dynamics": b["ideal"][col]["dynamics_deg"]})
     est = {}
     for k in KINDS:
         cs = [x["estimation"] for x in sw["cases"] if x["kind"] == k]

@@ -348,3 +348,56 @@ def test_verdict_is_silent_about_cancelling_when_nothing_cancels():
     text = " ".join(budget_sentences(b, 0.04))
     assert "−0.0029° of yaw" in text and "totals −0.00332°" in text
     assert "cancel" not in text
+
+
+def test_plot_coefficients_marks_zeros_and_values_below_the_axis():
+    import matplotlib.pyplot as plt
+
+    from plots.linearization import plot_coefficients
+    series = {"a": [1e-2, 0.0, 3e-4], "b": [1.5e-16, 2e-3, 0.0]}
+    fig = plot_coefficients(["x", "y", "z"], series, "caption", floor=1e-7)
+    ax = fig.axes[0]
+    bars = [p for p in ax.patches]
+    assert len(bars) == 6
+    widths = [b.get_width() for b in bars]
+    assert widths[0] == 1e-2 and widths[2] == 3e-4 and widths[4] == 2e-3
+    assert all(np.isnan(widths[k]) for k in (1, 3, 5))     # not drawn as bars ...
+    texts = {(t.get_text(), round(t.xy[1], 6)) for t in ax.texts}
+    ys = {k: round(bars[k].get_y() + bars[k].get_height() / 2, 6) for k in range(6)}
+    # ... but marked at the axis, with "0" or their value.
+    assert {("0", ys[1]), ("0", ys[5]), ("1.5e-16", ys[3])} <= texts
+    assert all(t.xy[0] == ax.get_xlim()[0] for t in ax.texts)
+    plt.close(fig)
+
+
+def test_plot_budget_draws_signed_bars_totals_and_zeros():
+    import matplotlib.pyplot as plt
+
+    from plots.linearization import plot_budget
+    b, col = CANCELLING, "initial"
+    cols = {"torque model": [r["contribution"][col]["torque_model_deg"] for r in b["rows"]],
+            "dynamics": [r["contribution"][col]["dynamics_deg"] for r in b["rows"]]}
+    total = {"torque model": -0.00244, "dynamics": -2.16e-5}
+    ideal = {"torque model": 8e-5, "dynamics": 2e-7}
+    fig = plot_budget([r["label"] for r in b["rows"]], cols, total,
+                      [r["in_scenario"] for r in b["rows"]], "caption", ideal=ideal)
+    ax = fig.axes[0]
+    assert ax.get_xscale() == "symlog"
+    n = len(b["rows"]) + 2                                   # + ideal, total
+    tm, dyn = ax.patches[:n], ax.patches[n:2 * n]
+    # Signed widths: negative bars go left of 0.
+    assert [p.get_width() for p in tm] == cols["torque model"] + [8e-5, -0.00244]
+    assert [p.get_width() for p in dyn] == cols["dynamics"] + [2e-7, -2.16e-5]
+    lo, hi = ax.get_xlim()
+    assert lo < min(cols["torque model"]) and hi > max(cols["torque model"])
+    labels = [t.get_text() for t in ax.get_yticklabels()]
+    assert labels[-1].startswith("total") and labels[-2].startswith("ideal")
+    # The totals as lines at their signed values.
+    xs = sorted(line.get_xdata()[0] for line in ax.lines if line.get_linestyle() == "--")
+    assert xs == [-0.00244, -2.16e-5]
+    # The exact zero (eclipse, dynamics) is marked "0" at x = 0 on its bar's row.
+    k = 1
+    y0 = dyn[k].get_y() + dyn[k].get_height() / 2
+    assert any(t.get_text() == "0" and t.xy == (0.0, pytest.approx(y0)) for t in ax.texts)
+    assert any(t.get_text() == "−0.0029" for t in ax.texts)
+    plt.close(fig)
