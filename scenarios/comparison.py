@@ -1,40 +1,92 @@
 """comparison.npz: the series every run figure is drawn from, float32 (drawing only).
 
-The figures (``scenarios.plotting``) read nothing else besides scenario.yaml and
-summary.json, so ``dynprop plot`` redraws exactly what ``run`` drew."""
+The figures (``scenarios.plotting``) read nothing else besides scenario.yaml, so
+``dynprop plot`` redraws exactly what ``run`` (or ``estimate``) drew, and which
+figures exist follows from which keys are here (``plotting.figure_set``).
+
+Keys (time first, N samples; state columns in ``estimator.model`` order, in
+display units: deg, deg/s, N m s, N m; written only when their inputs exist):
+
+- always: ``t_s`` (s, float64), ``yaw_present`` (1 where a Sun-sensor yaw is
+  used), ``x_real`` and ``sigma`` (N, 9) the filter's estimate and 1σ,
+  ``nis_real`` (N, 3) roll, yaw, h NIS (NaN where no update);
+- with a truth: ``truth_model`` (N, 9) the truth in the model's states,
+  ``err_real`` (N, 9) = x_real − truth_model, ``nees_real`` (N) NEES (NaN between
+  the samples it is computed on), ``err_smoothed`` (N, 9) with a smoother,
+  ``true_euler_deg`` (N, 3) yaw, roll, pitch (deg);
+- with a linear twin: ``err_linear`` (N, 9), ``nees_linear`` (N), and with a truth
+  too ``err_real_minus_linear`` (N, 3) roll (deg), yaw (deg), h (N m s) real −
+  linearized error, differenced in float64 before the float32 rounding (for h
+  the difference, ~1e-13 N m s, is below the float32 resolution of the errors);
+- with the telemetry: ``tel_roll_deg``, ``tel_pitch_deg``, ``tel_yaw_deg`` (deg,
+  NaN where absent), ``tel_yaw_sigma_deg`` (deg, a-priori 1σ of the ground yaw),
+  ``tel_sun_head`` (0 dss, 1 cass1, 2 cass2, NaN none), ``tel_wheelK_rpm`` (rpm).
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
 from estimator.consistency import nis
+from estimator.model import H_WHEEL, R, Y
 
 from .outputs import RAD2DEG, display_factors
 
+#: telemetry.csv columns the telemetry figure draws (besides every wheelK_rpm).
+TELEMETRY_COLUMNS = ("roll_deg", "pitch_deg", "yaw_deg", "yaw_sigma_deg", "sun_head")
+DIFF_STATES = (R, Y, H_WHEEL)   # columns of err_real_minus_linear: roll, yaw, h
 
-def comparison_arrays(runs, t_s, yaw_present, nees_data) -> dict[str, np.ndarray]:
+
+def _telemetry_arrays(telemetry: dict, n: int) -> dict[str, np.ndarray]:
+    names = [c for c in TELEMETRY_COLUMNS if c in telemetry] + \
+        sorted((c for c in telemetry if c.startswith("wheel") and c.endswith("_rpm")),
+               key=lambda c: int(c[5:-4]) if c[5:-4].isdigit() else 0)
+    out = {}
+    for c in names:
+        values = np.asarray(telemetry[c], dtype=float)
+        if values.shape != (n,):
+            raise ValueError(f"telemetry column {c} has {values.shape} values; the run has {n}")
+        out[f"tel_{c}"] = values
+    return out
+
+
+def comparison_arrays(runs, t_s, yaw_present, nees_data,
+                      telemetry: dict | None = None) -> dict[str, np.ndarray]:
     """Everything the run figures need, full resolution, float32 (drawing only).
-    Keys that need the truth (``runs.truth_model``, ``runs.sim``) or the linear twin
-    (``runs.linear``) are left out when those are None (``dynprop estimate``)."""
+
+    ``runs``: ``params`` and ``real`` always; ``smoothed``, ``linear`` with
+    ``twin_model``, ``truth_model`` and ``sim`` (``sim.truth.euler_rad``, (N, 3)
+    yaw, roll, pitch in rad) each may be None.  ``nees_data`` = (indices, real NEES
+    or None, linear NEES or None).  ``telemetry``: the telemetry.csv columns on the
+    filter's samples (as read back), or None."""
     f = display_factors(runs.params.omega_n_radps)
-    idx, real, lin = nees_data
-    out = {"t_s": t_s, "yaw_present": yaw_present.astype(np.float32),
-           "sigma": runs.real.sigma * np.abs(f), "x_real": runs.real.x * f,
-           "nis_real": nis(runs.real.innovations, runs.real.innovation_var)}
-
-    def every_tenth(values):
-        full = np.full(len(t_s), np.nan)
-        full[idx] = values
-        return full
-
-    if runs.truth_model is not None:
-        out.update(err_real=(runs.real.x - runs.truth_model) * f,
-                   truth_model=runs.truth_model * f, nees_real=every_tenth(real))
+    n = len(t_s)
+    real = runs.real
+    out = {"t_s": np.asarray(t_s, dtype=float),
+           "yaw_present": np.asarray(yaw_present, dtype=np.float32),
+           "x_real": real.x * f, "sigma": real.sigma * np.abs(f),
+           "nis_real": nis(real.innovations, real.innovation_var)}
+    truth = runs.truth_model is not None
+    twin = runs.linear is not None and runs.twin_model is not None
+    if truth:
+        err = real.x - runs.truth_model
+        out.update(truth_model=runs.truth_model * f, err_real=err * f)
         if runs.smoothed is not None:
             out["err_smoothed"] = (runs.smoothed.x - runs.truth_model) * f
-    if runs.linear is not None:
-        out.update(err_linear=(runs.linear.x - runs.twin_model) * f,
-                   nees_linear=every_tenth(lin))
+    if twin:
+        err_lin = runs.linear.x - runs.twin_model
+        out["err_linear"] = err_lin * f
+        if truth:
+            cols = list(DIFF_STATES)
+            out["err_real_minus_linear"] = (err - err_lin)[:, cols] * f[cols]
+    idx, nees_real, nees_lin = nees_data
+    for key, values in (("nees_real", nees_real), ("nees_linear", nees_lin)):
+        if values is not None:
+            series = np.full(n, np.nan)
+            series[idx] = values
+            out[key] = series
     if runs.sim is not None:
         out["true_euler_deg"] = runs.sim.truth.euler_rad * RAD2DEG  # yaw, roll, pitch
+    if telemetry is not None:
+        out.update(_telemetry_arrays(telemetry, n))
     return {k: (v if k == "t_s" else np.asarray(v, dtype=np.float32)) for k, v in out.items()}
