@@ -1,4 +1,11 @@
-"""`dynprop plot DIR`: read a run directory's files and hand arrays to ``plots``."""
+"""`dynprop plot DIR`: read a run directory's files and hand arrays to ``plots``.
+
+A `run` or `estimate` directory is drawn from scenario.yaml and comparison.npz
+alone, by ``plot_run_figures``, which both the commands and `dynprop plot` call:
+``figure_set`` decides the figures from the keys comparison.npz holds, so a redraw
+gives exactly the set the command drew.  A `simulate` directory (no comparison.npz)
+gets truth.png and telemetry.png from its CSV files.
+"""
 
 from __future__ import annotations
 
@@ -11,13 +18,11 @@ import yaml
 
 from estimator import model as em
 from estimator.consistency import chi2_bounds
-from plots.run_figures import (
-    plot_consistency,
-    plot_errors,
-    plot_telemetry_overview,
-    plot_torques,
-)
-from plots.telemetry import plot_telemetry
+from estimator.covariance import PAPER_SIGMA_YAW_DEG
+from plots.consistency import plot_consistency
+from plots.errors import plot_errors, plot_estimates
+from plots.run_figures import TORQUE_NAMES, plot_torques
+from plots.telemetry import plot_telemetry_overview
 from plots.truth import plot_truth
 
 from .csvio import read_csv
@@ -27,6 +32,11 @@ from .workers import worker_pool
 # Columns of the comparison arrays: the model's state indices (estimator.model).
 COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
            "N_cx": em.NCX, "N_cz": em.NCZ}
+UNITS = {"roll": "deg", "yaw": "deg", "h": "N m s"}
+# Every figure name a run directory can hold: a redraw removes those not in its set.
+RUN_FIGURES = ("errors.png", "estimates.png", "consistency.png", "torques.png",
+               "telemetry_overview.png")
+SIMULATE_FIGURES = ("truth.png", "telemetry.png")
 
 
 def save_figure(fig, path: Path) -> Path:
@@ -40,8 +50,8 @@ def save_figure(fig, path: Path) -> Path:
 
 
 def _draw(job) -> Path:
-    function, args, path = job
-    return save_figure(function(*args), path)
+    function, args, kwargs, path = job
+    return save_figure(function(*args, **kwargs), path)
 
 
 def _draw_all(jobs) -> list[Path]:
@@ -57,59 +67,114 @@ def _title(scenario: dict) -> str:
             f"dynprop {scenario.get('dynprop_version') or '?'}")
 
 
-def plot_run_figures(run_dir: Path, telemetry: dict | None = None) -> list[Path]:
-    """The four `dynprop run` figures from comparison.npz and telemetry.csv."""
+def figure_set(keys) -> list[str]:
+    """The figures of a run directory, from the keys of its comparison.npz alone:
+    errors.png with a truth (``err_real``), else estimates.png; consistency.png and
+    torques.png always; telemetry_overview.png when the telemetry is stored."""
+    keys = set(keys)
+    return ["errors.png" if "err_real" in keys else "estimates.png", "consistency.png",
+            "torques.png"] + (["telemetry_overview.png"] if "tel_yaw_deg" in keys else [])
+
+
+def _dss_note(scenario: dict) -> str | None:
+    """Why yaw NIS is small in DSS periods, with the filter's σ inflation for the DSS
+    (``pipeline.yaw_correlation_inflation``, the function the filter used)."""
+    from .loader import validate
+    from .pipeline import yaw_correlation_inflation
+    s = validate(scenario)
+    factor = float(np.sqrt(yaw_correlation_inflation(s, [0.0])[0]))
+    if factor <= 1.0:
+        return None
+    return (f"DSS yaw deliberately down-weighted:\nthe filter's σ is {factor:.0f}× the "
+            f"telemetry's\n(quantization error correlated over\nestimator."
+            f"dss_error_correlation_s = {s.estimator.dss_error_correlation_s:g} s),\n"
+            f"so yaw NIS ≈ 1/{factor ** 2:.0f} here by design")
+
+
+def _errors_job(c: dict, gap, title: str, min_gap_s: float):
+    if "err_real" not in c:
+        series = {n: {"unit": UNITS[n], "estimate": c["x_real"][:, COLUMNS[n]],
+                      "sigma": c["sigma"][:, COLUMNS[n]]} for n in UNITS}
+        return plot_estimates, (c["t_s"], gap, series, title, min_gap_s), \
+            {"paper_sigma_deg": PAPER_SIGMA_YAW_DEG}
+    series = {}
+    for j, n in enumerate(UNITS):
+        i = COLUMNS[n]
+        s = {"unit": UNITS[n], "real": c["err_real"][:, i], "sigma": c["sigma"][:, i],
+             "style": "trace" if n == "yaw" else "envelope"}
+        if "err_linear" in c:
+            s["linear"] = c["err_linear"][:, i]
+        if "err_real_minus_linear" in c:
+            s["difference"] = c["err_real_minus_linear"][:, j]
+        if "err_smoothed" in c:
+            s["smoothed"] = c["err_smoothed"][:, i]
+        if n == "yaw":
+            s["reference"] = (PAPER_SIGMA_YAW_DEG, "paper σ_yaw (Eq. 56)")
+        series[n] = s
+    return plot_errors, (c["t_s"], gap, series, title, min_gap_s), \
+        {"paper_sigma_deg": PAPER_SIGMA_YAW_DEG}
+
+
+def _consistency_job(c: dict, gap, title: str, scenario: dict):
+    nees = {k: c[f"nees_{k}"] for k in ("real", "linear") if f"nees_{k}" in c} or None
+    nis = {m: c["nis_real"][:, i] for i, m in enumerate(("roll", "yaw", "h"))}
+    dss = None
+    if "tel_sun_head" in c:
+        dss = (c["tel_sun_head"] == 0) & (c["yaw_present"] > 0.5)
+    note = _dss_note(scenario) if dss is not None and dss.any() else None
+    return plot_consistency, (c["t_s"], gap, nees, em.N_STATES, chi2_bounds(em.N_STATES),
+                              nis, chi2_bounds(1), title), {"dss": dss, "dss_note": note}
+
+
+def _torques_job(c: dict, gap, title: str):
+    truth = {k: c["truth_model"][:, COLUMNS[k]] for k in TORQUE_NAMES} \
+        if "truth_model" in c else None
+    return plot_torques, (c["t_s"], gap, {k: c["x_real"][:, COLUMNS[k]] for k in TORQUE_NAMES},
+                          {k: c["sigma"][:, COLUMNS[k]] for k in TORQUE_NAMES}, title), \
+        {"truth": truth}
+
+
+def _telemetry_job(c: dict, gap, title: str):
+    measured = {n: c[f"tel_{n}_deg"] for n in ("roll", "pitch", "yaw") if f"tel_{n}_deg" in c}
+    truth = None
+    if "true_euler_deg" in c:
+        e = c["true_euler_deg"]
+        truth = {"yaw": e[:, 0], "roll": e[:, 1], "pitch": e[:, 2]}
+    wheels = {k[4:]: c[k] for k in c if k.startswith("tel_wheel") and k.endswith("_rpm")}
+    return plot_telemetry_overview, (c["t_s"], measured, truth, wheels, gap, title), \
+        {"yaw_sigma": c.get("tel_yaw_sigma_deg"), "sun_head": c.get("tel_sun_head")}
+
+
+def plot_run_figures(run_dir: Path, _unused=None) -> list[Path]:
+    """The figures of a `run` or `estimate` directory, from scenario.yaml and
+    comparison.npz only; the set is ``figure_set`` of the stored keys, and figures
+    of another set left by an earlier drawing are removed.  (The second argument
+    is accepted and ignored: callers used to pass the telemetry columns.)"""
     run_dir = Path(run_dir)
     scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
     title = _title(scenario)
-    c = dict(np.load(run_dir / "comparison.npz"))
-    tel = telemetry if telemetry is not None else read_csv(run_dir / "telemetry.csv")
-    t = c["t_s"]
+    with np.load(run_dir / "comparison.npz") as npz:
+        c = {k: npz[k] for k in npz.files}
     gap = c["yaw_present"] < 0.5
-    col = COLUMNS
-
-    def series(name, unit):
-        i = col[name]
-        return {"unit": unit, "real": c["err_real"][:, i], "linear": c["err_linear"][:, i],
-                "sigma": c["sigma"][:, i], "smoothed": c["err_smoothed"][:, i]}
-
+    # Sun gaps as summary.json counts them (not the noon outages).
+    min_gap_s = 3600.0 * scenario["estimator"]["sun_gap_min_h"]
+    builders = {
+        "errors.png": lambda: _errors_job(c, gap, title, min_gap_s),
+        "estimates.png": lambda: _errors_job(c, gap, title, min_gap_s),
+        "consistency.png": lambda: _consistency_job(c, gap, title, scenario),
+        "torques.png": lambda: _torques_job(c, gap, title),
+        "telemetry_overview.png": lambda: _telemetry_job(c, gap, title),
+    }
     out = run_dir / "plots"
     out.mkdir(exist_ok=True)
-    torques = ("N_px", "N_pz", "N_cx", "N_cz")
-    nis = {m: c["nis_real"][:, i] for i, m in enumerate(("roll", "yaw", "h"))}
-    euler = c["true_euler_deg"]
-    wheels = {k: tel[k] for k in tel if k.startswith("wheel") and k.endswith("_rpm")}
-    def held(a):
-        # NEES is stored every 10th sample; hold each value until the next (drawing only).
-        idx = np.where(np.isfinite(a), np.arange(len(a)), 0)
-        return a[np.maximum.accumulate(idx)]
-
-    jobs = [
-        (plot_errors, (t, gap, {"roll": series("roll", "deg"), "yaw": series("yaw", "deg"),
-                                "h": series("h", "N m s")}, title,
-                       # Sun gaps as summary.json counts them (not the noon outages).
-                       3600.0 * scenario["estimator"]["sun_gap_min_h"]), out / "errors.png"),
-        (plot_consistency, (t, held(c["nees_real"]), held(c["nees_linear"]), em.N_STATES,
-                            chi2_bounds(em.N_STATES), nis, chi2_bounds(1), title),
-         out / "consistency.png"),
-        (plot_torques, (t, gap, {k: c["x_real"][:, col[k]] for k in torques},
-                        {k: c["truth_model"][:, col[k]] for k in torques},
-                        {k: c["sigma"][:, col[k]] for k in torques}, title),
-         out / "torques.png"),
-        (plot_telemetry_overview,
-         (t, {"roll": tel["roll_deg"], "pitch": tel["pitch_deg"], "yaw": tel["yaw_deg"]},
-          {"roll": euler[:, 1], "pitch": euler[:, 2], "yaw": euler[:, 0]}, wheels, gap, title),
-         out / "telemetry_overview.png"),
-    ]
-    return _draw_all(jobs)
+    names = figure_set(c)
+    for stale in set(RUN_FIGURES + SIMULATE_FIGURES) - set(names):
+        (out / stale).unlink(missing_ok=True)
+    return _draw_all([(*builders[name](), out / name) for name in names])
 
 
-def plot_run(run_dir: Path) -> list[Path]:
-    run_dir = Path(run_dir)
-    needed = [run_dir / n for n in ("scenario.yaml", "truth.csv", "telemetry.csv")]
-    missing = [p.name for p in needed if not p.is_file()]
-    if missing:
-        raise RunDirError(f"{run_dir}: not a run directory (missing {', '.join(missing)})")
+def plot_simulation(run_dir: Path) -> list[Path]:
+    """truth.png and telemetry.png of a `simulate` directory, from its CSV files."""
     scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
     title = _title(scenario)
     truth = read_csv(run_dir / "truth.csv")
@@ -122,14 +187,29 @@ def plot_run(run_dir: Path) -> list[Path]:
     written = [save_figure(plot_truth(
         truth["t_s"], {n: truth[f"{n}_deg"] for n in ("yaw", "roll", "pitch")}, truth["h_Nms"],
         torques, truth["eclipse"] > 0, f"Truth: {title}"), out / "truth.png")]
-    heads = [k[:-10] for k in tel if k.endswith("_alpha_deg")]
-    sun_head = np.where(np.isfinite(tel["sun_head"]), tel["sun_head"], -1).astype(int)
-    written.append(save_figure(plot_telemetry(
-        tel["t_s"], truth["yaw_deg"], tel["yaw_deg"], tel["yaw_sigma_deg"], sun_head, heads,
-        tel["roll_deg"] - truth["roll_deg"], tel["pitch_deg"] - truth["pitch_deg"],
-        ~np.isfinite(tel["yaw_deg"]), f"Telemetry: {title}"), out / "telemetry.png"))
-    if (run_dir / "comparison.npz").is_file():
-        written += plot_run_figures(run_dir, tel)
+    angles = ("roll", "pitch", "yaw")
+    wheels = {k: tel[k] for k in tel if k.startswith("wheel") and k.endswith("_rpm")}
+    written.append(save_figure(plot_telemetry_overview(
+        tel["t_s"], {n: tel[f"{n}_deg"] for n in angles}, {n: truth[f"{n}_deg"] for n in angles},
+        wheels, ~np.isfinite(tel["yaw_deg"]), title, yaw_sigma=tel.get("yaw_sigma_deg"),
+        sun_head=tel.get("sun_head")), out / "telemetry.png"))
+    return written
+
+
+def plot_run(run_dir: Path) -> list[Path]:
+    """`dynprop plot` on a run directory: a `run`/`estimate` one (comparison.npz) is
+    redrawn exactly as the command drew it; a `simulate` one gets its two figures."""
+    run_dir = Path(run_dir)
+    have = {p.name for p in run_dir.iterdir()} if run_dir.is_dir() else set()
+    if {"scenario.yaml", "comparison.npz"} <= have:
+        written = plot_run_figures(run_dir)
+    elif {"scenario.yaml", "truth.csv", "telemetry.csv"} <= have:
+        written = plot_simulation(run_dir)
+    else:
+        missing = [n for n in ("scenario.yaml", "truth.csv", "telemetry.csv") if n not in have]
+        raise RunDirError(f"{run_dir}: not a run directory (missing {', '.join(missing)}; "
+                          "or scenario.yaml and comparison.npz)")
     import matplotlib.pyplot as plt
     plt.close("all")
     return written
+

@@ -90,7 +90,7 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background)
     in_background(stage / "estimate.csv",
                   estimate_columns(t, runs.real.x, runs.real.sigma, runs.params.omega_n_radps))
     nees_data = nees_series(runs)
-    np.savez(stage / "comparison.npz", **comparison_arrays(runs, t, present, nees_data))
+    np.savez(stage / "comparison.npz", **comparison_arrays(runs, t, present, nees_data, written))
     summary = summarize(s, runs, t, present, nees_data)
     from .plotting import plot_run_figures
     plot_run_figures(stage, written)
