@@ -186,7 +186,7 @@ def _difference_panel(ax, t_s, t_h, gap, name: str, s: dict, interval_s: float) 
     if worst > 0:
         k = int(np.nanargmax(np.abs(d)))
         # The reference σ joins the axis when that keeps Δ at a fifth of it or more.
-        half = 1.15 * (ref if ref <= 5 * worst else worst)
+        half = 1.15 * (max(ref, worst) if ref <= 5 * worst else worst)
         ax.plot([t_h[k]], [d[k]], "o", mfc="none", mec=DIFF, ms=7, mew=1.2, zorder=4)
         rms = float(np.sqrt(np.nanmean(d * d)))
         where = (f"max |Δ| = {fmt(worst, 2)} {unit} at {t_h[k]:.2f} h, "

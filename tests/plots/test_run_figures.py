@@ -187,6 +187,25 @@ def test_difference_panels_show_the_difference_on_its_own_scale(run, draw):
     assert panels["yaw"].get_ylim()[1] > 100 * YAW_DIFF_MAX
 
 
+@pytest.mark.parametrize("ref_over_max", [0.3, 1.0, 3.0, 60.0])
+def test_difference_panel_holds_its_maximum_whatever_the_reference(run, ref_over_max):
+    """Where the linearization breaks, real − linearized exceeds the paper's σ: the
+    axis still holds every value, and the reference is drawn only when it fits."""
+    series = {"yaw": dict(run["series"]["yaw"])}
+    series["yaw"]["reference"] = (ref_over_max * YAW_DIFF_MAX, "paper σ_yaw (Eq. 56)")
+    fig = plot_errors(run["t_s"], run["gap"], series, TITLE, 3600.0)
+    try:
+        ax = _panels(fig)["Δ yaw"]
+        lo, hi = ax.get_ylim()
+        assert hi >= YAW_DIFF_MAX and -lo >= YAW_DIFF_MAX
+        assert hi <= 10 * YAW_DIFF_MAX
+        dashed = [ln for ln in ax.get_lines() if ln.get_linestyle() == "--"]
+        assert bool(dashed) == (ref_over_max * YAW_DIFF_MAX <= hi)
+        assert ("off scale" in ax.get_title(loc="left")) == (not dashed)
+    finally:
+        plt.close(fig)
+
+
 def test_no_silent_clipping(run, draw):
     """Every error trace is inside its axes, or the panel says how much is off scale
     and where its largest value is (the synthetic yaw starts at 0.67°)."""
