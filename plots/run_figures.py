@@ -49,8 +49,9 @@ def _torque_panel(ax, t_h, name: str, est, sig, tru) -> None:
         ax.plot(*minmax_line(t_h, err), color="C3", lw=0.9, zorder=3,
                 label="estimate − truth (projected)")
         ax.axhline(0.0, color="0.4", lw=0.5, zorder=1)
+        # σ counts as data here: its start (the prior) is within a few times its end.
         c, data = 0.0, {"estimate − truth": err, "true torque": tru}
-        half = robust_half(data.values(), [sig])
+        half = robust_half([*data.values(), sig])
         what = f"{name} error"
     else:
         x, lo, hi = band(t_h, est - sig, est + sig)
@@ -64,8 +65,8 @@ def _torque_panel(ax, t_h, name: str, est, sig, tru) -> None:
     ax.set_ylim(c - half, c + half)
     note_clipped(ax, t_h, {**data, "filter σ": c + sig}, c - half, c + half, "N m")
     ax.set_ylabel(f"{what} ({engineering_axis(ax)}N m)")
-    how = "estimate − truth, ±1σ" if tru is not None else "estimate ±1σ (no truth given)"
-    ax.set_title(f"{name}: {_TORQUE_DESC.get(name, 'torque')}; {how}", loc="left", fontsize=9)
+    # Short: the suptitle says what is drawn, and a clipping note may share the line.
+    ax.set_title(f"{name}: {_TORQUE_DESC.get(name, 'torque')}", loc="left", fontsize=9)
     ax.grid(alpha=0.3)
 
 

@@ -235,7 +235,7 @@ def test_torques_show_error_with_one_sigma_and_do_not_clip_silently(run, draw):
     fig = draw("torques")
     for ax, name in zip(fig.axes, TORQUES, strict=True):
         assert ax.get_ylabel() == f"{name} error (10⁻⁶ N m)"
-        assert "estimate − truth, ±1σ" in ax.get_title(loc="left")
+        assert ax.get_title(loc="left").startswith(f"{name}: ")
         lo, hi = ax.get_ylim()
         err = run["est"][name] - run["tru"][name]
         if err.min() < lo or err.max() > hi:
@@ -244,6 +244,7 @@ def test_torques_show_error_with_one_sigma_and_do_not_clip_silently(run, draw):
         sig = np.median(run["tsig"][name])
         assert hi < 10 * sig
     assert "filter ±1σ" in _legend_texts(fig)
+    assert "estimate − truth with ±1σ" in fig._suptitle.get_text()
 
 
 def test_yaw_panel_marks_paper_sigma_at_gap_ends(run, draw):
