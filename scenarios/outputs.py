@@ -19,7 +19,6 @@ from .schema import Scenario
 RAD2DEG = 180.0 / np.pi
 # Estimate columns: state name with its unit, and the factor from model units
 # (ṙ/ω_n and ẏ/ω_n are written as rates in deg/s).
-STATE_NAMES = ("roll", "roll_rate", "yaw", "yaw_rate", "h", "N_px", "N_pz", "N_cx", "N_cz")
 STATE_COLUMNS = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms",
                  "N_px_Nm", "N_pz_Nm", "N_cx_Nm", "N_cz_Nm")
 
@@ -83,7 +82,8 @@ def eq55_sigma_yaw_deg(s: Scenario, params) -> float:
 
 
 def _per_state(values) -> dict[str, float]:
-    return {name: float(v) for name, v in zip(STATE_NAMES, values, strict=True)}
+    # Keyed by estimate.csv's column names, as montecarlo.json's per-state figures.
+    return {name: float(v) for name, v in zip(STATE_COLUMNS, values, strict=True)}
 
 
 def _nis_means(result) -> dict[str, float | None]:

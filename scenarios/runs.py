@@ -137,7 +137,8 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
               estimate_columns(t, smoothed.x, smoothed.sigma, params.omega_n_radps))
     present = np.isfinite(grid.columns["yaw_deg"])
     nees_data = nees_series(runs)
-    np.savez(stage / "comparison.npz", **comparison_arrays(runs, t, present, nees_data))
+    np.savez(stage / "comparison.npz",
+             **comparison_arrays(runs, t, present, nees_data, grid.columns))
     summary = summarize(s, runs, t, present, nees_data)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s)}
     from .plotting import plot_run_figures
