@@ -38,7 +38,6 @@ F32_REL = 2.0**-24
 RUN_FILES = {"scenario.yaml", "truth.csv", "telemetry.csv", "estimate.csv", "summary.json",
              "comparison.npz", "plots"}
 RUN_FIGURES = {"errors.png", "consistency.png", "torques.png", "telemetry_overview.png"}
-ALL_FIGURES = RUN_FIGURES | {"truth.png", "telemetry.png"}
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 # 17:00 local at 75° W on the equinox: the night Sun gap (~20:08–04:00 local) falls
 # 3.25–11.1 h into the run, so a 13 h run holds one whole gap and its end.
@@ -469,15 +468,16 @@ def test_bad_telemetry_exits_2_with_one_line_and_writes_nothing(short_run, tmp_p
 # --------------------------------------------------------------------------- dynprop plot
 
 
-def test_plot_redraws_all_six_figures(short_run, tmp_path):
+def test_plot_redraws_the_run_figures(short_run, tmp_path):
+    """`dynprop plot` on a run directory draws exactly run's set, with its names."""
     run = tmp_path / "run"
     shutil.copytree(short_run[0], run)
     shutil.rmtree(run / "plots")
     rc, stdout, err = run_cli("plot", str(run))
     assert rc == 0, err
-    assert {Path(line).name for line in stdout.splitlines()} == ALL_FIGURES
-    assert {p.name for p in (run / "plots").iterdir()} == ALL_FIGURES
-    for name in ALL_FIGURES:
+    assert {Path(line).name for line in stdout.splitlines()} == RUN_FIGURES
+    assert {p.name for p in (run / "plots").iterdir()} == RUN_FIGURES
+    for name in RUN_FIGURES:
         png = (run / "plots" / name).read_bytes()
         assert png.startswith(PNG_MAGIC) and len(png) > 20_000, name
 
