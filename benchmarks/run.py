@@ -1,6 +1,6 @@
 """`make bench`: the speed figures the issues ask for, one line each.
 
-Format (DESIGN.md section 6): ``bench <name> <value> <unit>``.  Each figure is
+Format: ``bench <name> <value> <unit>``.  Each figure is
 the median of several repetitions after a warm-up, because the machine is
 shared and noisy.
 """

@@ -1,4 +1,4 @@
-"""The scenario schema (DESIGN.md section 6): every key, its unit, its default.
+"""The scenario schema: every key, its unit, its default (docs/scenario-reference.md).
 
 Defaults are GOES-Next's from the paper, so a scenario file only lists what it
 changes.  Models are strict: unknown keys, wrong types, NaN and infinity are

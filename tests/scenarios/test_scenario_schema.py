@@ -1,4 +1,4 @@
-"""The scenario schema and loader (DESIGN.md section 6, "Scenario YAML").
+"""The scenario schema and loader (docs/scenario-reference.md).
 
 Bad input must raise ``ScenarioError`` with one line that starts with the key
 path (or the file); defaults must be the paper's GOES-Next numbers, written
@@ -263,7 +263,7 @@ def test_named_empty_scenario_takes_the_papers_goes_next_numbers():
     assert s.sensors.tachometer.noise_3sigma_rpm == 0.0978
     assert s.estimator.process_noise.q_x == 5.4e-7  # Eq. 45
     assert s.estimator.process_noise.q_z == 5.4e-7
-    assert s.sample_interval_s == 0.512  # DESIGN section 1
+    assert s.sample_interval_s == 0.512  # the paper's 0.512 s telemetry sample (Section 2)
     assert s.estimator.max_gap_s == 3600.0  # issue 13: an hour of dropout is propagated
     assert s.sensors.noise.enabled and s.control.enabled
     assert s.environment.gravity_gradient.enabled and s.environment.solar.enabled
@@ -284,7 +284,7 @@ def test_default_spacecraft_has_the_papers_pitch_bias():
 
 def test_default_solar_residual_is_a_trimmed_one():
     coefficient = build.build_environment(validate({"name": "bare"})).solar.coefficient_Nm
-    assert 1e-7 <= abs(coefficient) <= 1e-5  # DESIGN section 4: trimmed residual range
+    assert 1e-7 <= abs(coefficient) <= 1e-5  # the paper's abstract: 1e-7 to 1e-5 N m
 
 
 # --------------------------------------------------------------------------- bundled
