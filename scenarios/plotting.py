@@ -145,7 +145,7 @@ def _telemetry_job(c: dict, gap, title: str):
         {"yaw_sigma": c.get("tel_yaw_sigma_deg"), "sun_head": c.get("tel_sun_head")}
 
 
-def plot_run_figures(run_dir: Path, _unused=None) -> list[Path]:
+def plot_run_figures(run_dir: Path) -> list[Path]:
     """The figures of a `run` or `estimate` directory, from scenario.yaml and
     comparison.npz only; the set is ``figure_set`` of the stored keys, and figures
     of another set left by an earlier drawing are removed.  (The second argument

@@ -93,7 +93,7 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background)
     np.savez(stage / "comparison.npz", **comparison_arrays(runs, t, present, nees_data, written))
     summary = summarize(s, runs, t, present, nees_data)
     from .plotting import plot_run_figures
-    plot_run_figures(stage, written)
+    plot_run_figures(stage)
     return summary
 
 
@@ -142,6 +142,6 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     summary = summarize(s, runs, t, present, nees_data)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s)}
     from .plotting import plot_run_figures
-    plot_run_figures(stage, grid.columns)
+    plot_run_figures(stage)
     write_summary(stage / "summary.json", summary)
     return summary

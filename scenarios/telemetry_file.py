@@ -57,6 +57,16 @@ class GriddedTelemetry:
                 "median_cadence_s": float(np.median(steps)) if steps.size else None}
 
 
+def read_input_csv(path: Path, kind: str) -> dict[str, np.ndarray]:
+    """The columns of a CSV the user named, or one line saying why it cannot be read."""
+    if not path.is_file():
+        raise RunDirError(f"{path}: no such {kind} file")
+    try:
+        return read_csv(path)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
+
+
 def _problem_columns(path: Path, cols: dict, required: tuple[str, ...]) -> list[str]:
     unused = [c for c in cols if c not in required and c not in OPTIONAL]
     problems = []
@@ -75,12 +85,7 @@ def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
     """A telemetry CSV's columns, checked.  Every problem is reported, one line
     each naming the column (or the row); the time tags are checked by ``on_grid``."""
     path = Path(path)
-    if not path.is_file():
-        raise RunDirError(f"{path}: no such telemetry file")
-    try:
-        cols = read_csv(path)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
+    cols = read_input_csv(path, "telemetry")
     n_wheels = len(build.yaw_factors(s))
     wheels = tuple(f"wheel{i + 1}_rpm" for i in range(n_wheels))
     required = (*REQUIRED, *wheels[2:])

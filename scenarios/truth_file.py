@@ -17,10 +17,10 @@ import numpy as np
 from sim.frames import dcm_from_euler312
 
 from . import build
-from .csvio import read_csv
 from .pipeline import EXTERNAL
 from .rundir import RunDirError
 from .schema import Scenario
+from .telemetry_file import read_input_csv
 
 DEG = np.pi / 180.0
 ATTITUDE = ("t_s", "yaw_deg", "roll_deg", "pitch_deg", "wx_radps", "wy_radps", "wz_radps",
@@ -32,12 +32,7 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> SimpleNamespace:
     the arrays ``pipeline.truth_torques`` and ``model_truth`` read, and ``euler_rad``
     (yaw, roll, pitch) for the figures."""
     path = Path(path)
-    if not path.is_file():
-        raise RunDirError(f"{path}: no such truth file")
-    try:
-        cols = read_csv(path)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
+    cols = read_input_csv(path, "truth")
     torque_cols = [f"{src}_{a}_Nm" for src in EXTERNAL for a in "xyz"]
     missing = [c for c in (*ATTITUDE, *torque_cols) if c not in cols]
     if missing:

@@ -17,7 +17,7 @@ import pytest
 from scenarios.cli import main
 from scenarios.comparison import comparison_arrays
 from scenarios.loader import load_scenario, resolved_yaml
-from scenarios.plotting import RUN_FIGURES, figure_set, plot_run, plot_run_figures
+from scenarios.plotting import RUN_FIGURES, figure_set, plot_run
 
 N = 4000
 DT = 0.512
@@ -143,16 +143,6 @@ def test_plot_draws_the_figure_set_of_each_subset(tmp_path, truth, twin):
     assert sorted(p.name for p in (d / "plots").iterdir()) == sorted(names)
     for p in written:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-
-
-def test_plot_run_figures_ignores_the_telemetry_argument(tmp_path):
-    """The figures come from comparison.npz alone: what a caller passes as telemetry
-    (the old second argument) changes nothing."""
-    _, c = arrays(True, True)
-    d = _run_dir(tmp_path, c)
-    first = {p.name: p.read_bytes() for p in plot_run_figures(d)}
-    second = {p.name: p.read_bytes() for p in plot_run_figures(d, {"roll_deg": np.zeros(3)})}
-    assert first == second
 
 
 def run_cli(*argv: str) -> tuple[int, str, str]:
