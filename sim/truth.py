@@ -124,14 +124,14 @@ def truth_model(n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str = "auto"
 
 
 def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environment,
-                ripple: np.ndarray, extra_torque: np.ndarray | None = None,
-                wheel_torque: np.ndarray | None = None
+                ripple: np.ndarray, extra_torque: np.ndarray | None, wheel_torque: np.ndarray
+                | None, sun: dict[str, np.ndarray], shadow: np.ndarray
                 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Per-step inputs of ``step.input_layout`` on the output grid, and the shadow."""
+    """Per-step inputs of ``step.input_layout`` at the samples ``t_s``, from the Sun
+    there (``_sun_on_grid``) and the shadow (``TruthStream._shadow``)."""
     n, n_wheels = len(t_s), ripple.shape[1]
     jd0 = ephemeris.julian_date(epoch)
     alpha = orbit.right_ascension(t_s, ephemeris.gmst_rad(jd0))
-    sun = _sun_on_grid(t_s, jd0)
     # Satellite-to-Sun direction in the orbit frame.  The geocentric Sun, at right
     # ascension λ and declination δ, is (ρ sin(λ−α), −sin δ, −ρ cos(λ−α)) in the frame
     # of GeoOrbit.orbit_frame (ρ = cos δ); the satellite sits at −R ẑ_R, so d ŝ − r
@@ -145,7 +145,6 @@ def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environm
     # |d ŝ + R ẑ|² = d² + 2 d R ŝ_z + R²
     sat_sun_dist = np.sqrt(d * (d - 2.0 * radius * sun["cos_dec"] * np.cos(phase)) + radius**2)
     sun_r /= sat_sun_dist[:, None]
-    shadow = _shadow_on_grid(alpha, sun, radius, env.shadow_model)
     mag = env.magnetic
     if mag.enabled and np.any(mag.profile_amplitude_Am2):
         m_prof = mag.profile(t_s)
@@ -176,56 +175,166 @@ def _sun_inertial(sun: dict[str, np.ndarray], idx) -> np.ndarray:
     return np.stack([cd * np.cos(ra), cd * np.sin(ra), sun["sin_dec"][idx]], axis=-1)
 
 
-def _shadow_on_grid(alpha: np.ndarray, sun: dict[str, np.ndarray], radius: float, model: str,
-                    every: int = 64) -> np.ndarray:
-    """Shadow factor on the output grid, evaluated only where it can be below 1.
+def _near_shadow(alpha_c, sun, idx_c, radius, step_len) -> np.ndarray:
+    """The coarse pass: which coarse samples come within the penumbra's reach."""
+    r = radius * np.stack([np.cos(alpha_c), np.sin(alpha_c), np.zeros(len(alpha_c))], -1)
+    along = np.einsum("ij,ij->i", r, _sun_inertial(sun, idx_c))
+    perp = np.sqrt(np.maximum(radius**2 - along**2, 0.0))
+    reach = ephemeris.R_EARTH_M + 2.0 * radius * ephemeris.R_SUN_M / sun["dist"][idx_c] \
+        + step_len
+    return (along < step_len) & (perp < reach)
 
-    A coarse pass (every ``every`` samples) flags the stretches that come within
-    the penumbra's reach of the Earth's shadow axis, padded by the distance the
-    satellite covers in one coarse interval; only those samples get the exact
-    model.  Outside eclipse season nothing at all is evaluated finely.
-    """
+
+def _shadow_fine(coarse, near, start, alpha, sun, radius, model, every) -> np.ndarray:
+    """Shadow of the samples ``start`` … ``start + len(alpha) − 1`` (``alpha`` and
+    ``sun`` hold those): the exact model within ``every`` samples of each flagged
+    coarse sample (global indices ``coarse``), 1 elsewhere."""
     n = len(alpha)
     out = np.ones(n)
-    if model == "none":  # no eclipses: isolates their effect (the linearization report)
-        return out
-
-    def r_sat(i):
-        return radius * np.stack([np.cos(alpha[i]), np.sin(alpha[i]), np.zeros(len(i))], -1)
-
-    idx = np.arange(0, n, every)
-    along = np.einsum("ij,ij->i", r_sat(idx), _sun_inertial(sun, idx))
-    perp = np.sqrt(np.maximum(radius**2 - along**2, 0.0))
-    step_len = radius * abs(alpha[min(every, n - 1)] - alpha[0])
-    reach = ephemeris.R_EARTH_M + 2.0 * radius * ephemeris.R_SUN_M / sun["dist"][idx] + step_len
-    near = (along < step_len) & (perp < reach)
     if not np.any(near):
         return out
     fine = np.zeros(n, dtype=bool)
-    for k in np.flatnonzero(near):
-        fine[max(idx[k] - every, 0):idx[k] + every + 1] = True
+    for g in coarse[near]:
+        fine[max(g - every - start, 0):max(g + every + 1 - start, 0)] = True
     fine = np.flatnonzero(fine)
-    out[fine] = ephemeris.shadow_factor(r_sat(fine), _sun_inertial(sun, fine),
-                                        sun["dist"][fine], model=model)
+    r_sat = radius * np.stack([np.cos(alpha[fine]), np.sin(alpha[fine]),
+                               np.zeros(len(fine))], -1)
+    out[fine] = ephemeris.shadow_factor(r_sat, _sun_inertial(sun, fine), sun["dist"][fine],
+                                        model=model)
     return out
 
 
-def _sun_on_grid(t_s: np.ndarray, jd0: float, every: int = 128) -> dict[str, np.ndarray]:
-    """The Sun's right ascension, cos and sin of declination, and distance (m) on the
-    output grid.
+SUN_EVERY = 128   # samples between ephemeris nodes (about a minute)
 
-    The ephemeris is evaluated every ``every`` samples (about a minute) and these
-    slowly varying quantities are interpolated linearly: the Sun moves about 1e-5 rad
-    a minute, so the error (≈ angle²/8 ≈ 2e-11 rad) is far below the ephemeris's own
-    0.01°, and the day-long evaluation costs almost nothing.
-    """
-    idx = np.arange(0, len(t_s) + every - 1, every)
-    idx[-1] = min(idx[-1], len(t_s) - 1)
+
+def _sun_nodes(n: int, dt_s: float, jd0: float, every: int = SUN_EVERY):
+    """The ephemeris nodes of a run of ``n`` samples: their times and the Sun's right
+    ascension (unwrapped over the run), cos and sin of declination, and distance."""
+    idx = np.arange(0, n + every - 1, every)
+    idx[-1] = min(idx[-1], n - 1)
     idx = np.unique(idx)
-    unit, dist = ephemeris.sun_position_eci(jd0 + t_s[idx] / 86400.0)
-    nodes = {"ra": np.unwrap(np.arctan2(unit[:, 1], unit[:, 0])),
-             "cos_dec": np.hypot(unit[:, 0], unit[:, 1]), "sin_dec": unit[:, 2], "dist": dist}
-    return {k: np.interp(t_s, t_s[idx], v) for k, v in nodes.items()}
+    t_nodes = np.round(idx * dt_s, 9)   # the run's sample times there (simulate_truth)
+    unit, dist = ephemeris.sun_position_eci(jd0 + t_nodes / 86400.0)
+    return t_nodes, {"ra": np.unwrap(np.arctan2(unit[:, 1], unit[:, 0])),
+                     "cos_dec": np.hypot(unit[:, 0], unit[:, 1]), "sin_dec": unit[:, 2],
+                     "dist": dist}
+
+
+def _sun_on_grid(t_s: np.ndarray, nodes) -> dict[str, np.ndarray]:
+    """The Sun's right ascension, cos and sin of declination, and distance (m) at the
+    samples ``t_s``, interpolated linearly between the run's ephemeris ``nodes``
+    (``_sun_nodes``).
+
+    These slowly varying quantities need the ephemeris only every ``SUN_EVERY``
+    samples (about a minute): the Sun moves about 1e-5 rad a minute, so the error
+    (≈ angle²/8 ≈ 2e-11 rad) is far below the ephemeris's own 0.01°, and the
+    day-long evaluation costs almost nothing.  np.interp at a sample depends only on
+    the nodes either side, so a window gets the values the whole run has.
+    """
+    t_nodes, values = nodes
+    return {k: np.interp(t_s, t_nodes, v) for k, v in values.items()}
+
+
+class TruthStream:
+    """The truth of one run, simulated a window at a time.
+
+    ``window(a, b)`` gives samples a … b−1 for contiguous, increasing windows (the
+    first from 0).  Concatenated, the windows equal ``simulate_truth``'s whole-run
+    arrays bit for bit, which is what ``simulate_truth`` is: one window.  Carried
+    from window to window: the RK4 state and the ripple generator (whose draws
+    continue the one stream).  Aligned on the run: the Sun's ephemeris nodes (every
+    128 samples from the start, unwrapped over the run) and the shadow's coarse
+    pass (every 64 samples from the start, its padding from the run's first
+    interval).  Everything else is per sample.  Memory is the window's, whatever
+    the run's length (the run's Sun nodes: 32 bytes per 128 samples)."""
+
+    def __init__(self, spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environment,
+                 control: Control, initial: InitialState, epoch: datetime, duration_s: float,
+                 dt_s: float = 0.512, rng: np.random.Generator | None = None,
+                 extra_torque: np.ndarray | None = None,
+                 wheel_torque: np.ndarray | None = None, model: TruthModel | None = None):
+        if not (np.isfinite(duration_s) and duration_s >= 0):
+            raise ValueError("duration_s must be finite and non-negative")
+        if not (np.isfinite(dt_s) and dt_s > 0):
+            raise ValueError("dt_s must be positive")
+        self.spacecraft, self.orbit, self.environment = spacecraft, orbit, environment
+        self.epoch, self.dt_s = epoch, dt_s
+        self.n_samples = int(np.floor(duration_s / dt_s + 1e-9)) + 1
+        n, nw = self.n_samples, spacecraft.n_wheels
+        self.sigma = environment.ripple.step_sigma_Nm(dt_s)
+        if self.sigma > 0 and rng is None:
+            raise ValueError("an rng is required when wheel ripple is enabled")
+        self.rng = rng
+        self.extra_torque = None if extra_torque is None else \
+            _checked(extra_torque, (n, 3), "extra torque")
+        self.wheel_torque = None if wheel_torque is None else \
+            _checked(wheel_torque, (n, nw), "wheel torque")
+        self.p = pack_params(spacecraft, orbit, environment, control, dt_s)
+        self.model = model or truth_model(nw, DEFAULT_CHUNK, requested_backend())
+        self.x = initial.state_vector(spacecraft, orbit)
+        self.jd0 = ephemeris.julian_date(epoch)
+        self.gmst0 = ephemeris.gmst_rad(self.jd0)
+        self.sun_nodes = _sun_nodes(n, dt_s, self.jd0)
+        self.next_start = 0
+
+    def _t(self, k: np.ndarray) -> np.ndarray:
+        # Sample times rounded to the nanosecond: exact decimals (4.608, not
+        # 4.6080000000000005), so every file writes the same t_s to any precision.
+        return np.round(k * self.dt_s, 9)
+
+    def _shadow(self, a: int, b: int, alpha: np.ndarray, sun: dict, every: int = 64):
+        """Shadow factor of samples a … b−1, evaluated only where it can be below 1.
+
+        A coarse pass (every ``every`` samples from the run's start) flags the
+        stretches that come within the penumbra's reach of the Earth's shadow axis,
+        padded by the distance the satellite covers in one coarse interval; only
+        samples within ``every`` of a flagged one get the exact model.  Outside
+        eclipse season nothing at all is evaluated finely."""
+        model, radius, n = self.environment.shadow_model, self.orbit.radius_m, self.n_samples
+        if model == "none":  # no eclipses: isolates their effect (the linearization report)
+            return np.ones(b - a)
+        ends = self.orbit.right_ascension(self._t(np.array([0, min(every, n - 1)])), self.gmst0)
+        step_len = radius * abs(ends[1] - ends[0])
+        coarse = np.arange(max(a - every, 0) // every * every, min(b + every, n), every)
+        t_c = self._t(coarse)
+        sun_c = _sun_on_grid(t_c, self.sun_nodes)
+        near = _near_shadow(self.orbit.right_ascension(t_c, self.gmst0), sun_c,
+                            np.arange(len(coarse)), radius, step_len)
+        return _shadow_fine(coarse, near, a, alpha, sun, radius, model, every)
+
+    def window(self, a: int, b: int) -> TruthResult:
+        """The truth at samples a … b−1 (the next window starts at b)."""
+        if a != self.next_start or not a < b <= self.n_samples:
+            raise ValueError(f"windows must be contiguous and within the run: asked "
+                             f"[{a}, {b}), next is {self.next_start} of {self.n_samples}")
+        n_wheels = self.spacecraft.n_wheels
+        t_s = self._t(np.arange(a, b))
+        if self.sigma > 0:
+            ripple = self.sigma * self.rng.standard_normal((b - a, n_wheels))
+        else:
+            ripple = np.zeros((b - a, n_wheels))
+        sun = _sun_on_grid(t_s, self.sun_nodes)
+        alpha = self.orbit.right_ascension(t_s, self.gmst0)
+        shadow = self._shadow(a, b, alpha, sun)
+        cut = slice(a, b)
+        inputs, shadow = step_inputs(
+            t_s, self.epoch, self.orbit, self.environment, ripple,
+            None if self.extra_torque is None else self.extra_torque[cut],
+            None if self.wheel_torque is None else self.wheel_torque[cut], sun=sun,
+            shadow=shadow)
+        # One step per output sample: the last step's end state is the next window's
+        # first, kept as final_state.
+        states, aux = self.model.rollout(self.x, inputs, self.p)
+        # NaN never turns finite again in the state update, so the last state tells;
+        # only a failed run pays for finding where it went.
+        if not np.all(np.isfinite(states[-1])):
+            k = int(np.argmax(~np.isfinite(states).all(axis=1)))
+            raise FloatingPointError(f"the truth became non-finite at t = "
+                                     f"{(a + k) * self.dt_s:.1f} s: the closed loop is "
+                                     "unstable for these gains and this step")
+        self.x = states[-1].copy()
+        self.next_start = b
+        return _result(t_s, states, aux, inputs, shadow, self.spacecraft, self.model.backend)
 
 
 def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environment,
@@ -243,35 +352,20 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
     to the control's, each held over its step.  ``final_state`` is the state one
     step after the last sample (the step that produced the last sample's outputs).
     """
-    if not (np.isfinite(duration_s) and duration_s >= 0):
-        raise ValueError("duration_s must be finite and non-negative")
-    if not (np.isfinite(dt_s) and dt_s > 0):
-        raise ValueError("dt_s must be positive")
-    n = spacecraft.n_wheels
-    n_samples = int(np.floor(duration_s / dt_s + 1e-9)) + 1
-    # Sample times rounded to the nanosecond: exact decimals (4.608, not
-    # 4.6080000000000005), so every file writes the same t_s to any precision.
-    t_s = np.round(np.arange(n_samples) * dt_s, 9)
-    sigma = environment.ripple.step_sigma_Nm(dt_s)
-    if sigma > 0:
-        if rng is None:
-            raise ValueError("an rng is required when wheel ripple is enabled")
-        ripple = sigma * rng.standard_normal((n_samples, n))
-    else:
-        ripple = np.zeros((n_samples, n))
-    inputs, shadow = step_inputs(t_s, epoch, orbit, environment, ripple, extra_torque,
-                                 wheel_torque)
-    p = pack_params(spacecraft, orbit, environment, control, dt_s)
-    model = model or truth_model(n, DEFAULT_CHUNK, requested_backend())
-    # One step per output sample: the last step's end state is kept as final_state.
-    states, aux = model.rollout(initial.state_vector(spacecraft, orbit), inputs, p)
-    # NaN never turns finite again in the state update, so the last state tells;
-    # only a failed run pays for finding where it went.
-    if not np.all(np.isfinite(states[-1])):
-        k = int(np.argmax(~np.isfinite(states).all(axis=1)))
-        raise FloatingPointError(f"the truth became non-finite at t = {k * dt_s:.1f} s: the "
-                                 "closed loop is unstable for these gains and this step")
-    return _result(t_s, states, aux, inputs, shadow, spacecraft, model.backend)
+    stream = TruthStream(spacecraft, orbit, environment, control, initial, epoch, duration_s,
+                         dt_s, rng, extra_torque, wheel_torque, model)
+    return stream.window(0, stream.n_samples)
+
+
+def _reaction(motor_Nm: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """Body torque −Σ_i u_i a_i of the wheel motor torques (N, n) on axes (n, 3).
+    Summed wheel by wheel, not by a BLAS product: BLAS kernels treat the rows of a
+    block and of its tail differently (fused or not), so a row's bits would depend on
+    how long the window holding it is."""
+    out = np.zeros((len(motor_Nm), 3))
+    for i in range(axes.shape[0]):
+        out -= motor_Nm[:, i:i + 1] * axes[i]
+    return out
 
 
 def _result(t_s, states, aux, inputs, shadow, spacecraft, backend) -> TruthResult:
@@ -284,9 +378,9 @@ def _result(t_s, states, aux, inputs, shadow, spacecraft, backend) -> TruthResul
         "solar": a["t_solar"],
         "magnetic": a["t_mag"],
         "magnetic_control": a["t_mtq"],
-        "wheel_control": -a["u_cmd"] @ axes,
-        "wheel_input": -inputs["u_wheel"] @ axes,
-        "wheel_ripple": -inputs["ripple"] @ axes,
+        "wheel_control": _reaction(a["u_cmd"], axes),
+        "wheel_input": _reaction(inputs["u_wheel"], axes),
+        "wheel_ripple": _reaction(inputs["ripple"], axes),
         "external": inputs["n_ext"],
     }
     return TruthResult(
