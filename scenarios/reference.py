@@ -138,7 +138,8 @@ def _type_name(annotation) -> str:
     if origin is typing.Annotated:
         return _type_name(typing.get_args(annotation)[0])
     if origin is typing.Literal:
-        return " \\| ".join(f"`{a}`" for a in typing.get_args(annotation))
+        return " \\| ".join(f"`{str(a).lower() if isinstance(a, bool) else a}`"
+                             for a in typing.get_args(annotation))
     if origin is tuple:
         args = typing.get_args(annotation)
         inner = _type_name(args[0])
@@ -146,7 +147,10 @@ def _type_name(annotation) -> str:
             return f"{len(args)}×{inner.split()[2]} list of floats"
         return f"list of {len(args)} {inner}s"
     if origin in (typing.Union, types.UnionType):
-        return " or ".join(_type_name(a) for a in typing.get_args(annotation))
+        args = typing.get_args(annotation)
+        if type(None) in args and len(args) > 1:   # an optional value: null is allowed
+            return " or ".join([_type_name(a) for a in args if a is not type(None)] + ["null"])
+        return " or ".join(_type_name(a) for a in args)
     if _variants(annotation):
         return "mapping (entries below)"
     if annotation in (None, type(None)):

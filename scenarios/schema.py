@@ -36,7 +36,10 @@ _TACH = sensors.Tachometer()
 _Float = Annotated[float, Strict()]
 Vec3 = Annotated[tuple[_Float, _Float, _Float], Strict(False)]
 Matrix3 = Annotated[tuple[Vec3, Vec3, Vec3], Strict(False)]
-MAX_DURATION_S = 30 * 86400.0  # a truth day holds ~70 MB of arrays
+# A year and a day: `dynprop run` streams a run a window at a time, so its memory
+# does not grow with the duration.  The commands that hold whole arrays (simulate,
+# montecarlo, linearization, run --montecarlo-case) check their own 30-day limit.
+MAX_DURATION_S = 366 * 86400.0
 # The sampled control loop loses its damping for steps above about 2.2 s and diverges
 # by 2.5 s (one day from a 0.5 deg yaw offset: the attitude-rate transient still decays
 # at 2.4 s and grows 40-fold at 2.5 s).  The step is capped at two 0.512 s samples, a
@@ -317,6 +320,45 @@ class Estimator(_Section):
         "covariance grows); a longer one is rejected with the row where it starts.")
 
 
+DEFAULT_OUTPUT_INTERVAL_S = 64.0   # 125 samples of 0.512 s
+TELEMETRY_AUTO_MAX_S = 2 * 86400.0
+
+
+class Output(_Section):
+    """What `dynprop run` writes, as Basilisk recorders' sampling time, 42's DTOUT or
+    S2E's log period set it.  The rows of truth.csv, estimate.csv and comparison.npz
+    are the samples every ``interval_s`` (each the value at that sample, not an
+    average); every figure in summary.json and daily.csv is accumulated at the full
+    sample rate, and the figures draw a min/max envelope per output interval, so
+    the decimation hides no peak.  Full-rate telemetry is ~14 MB per simulated day
+    as CSV (5 GB a year), which is why ``auto`` writes it only for short runs."""
+
+    interval_s: float | None = Field(
+        None, gt=0, description="spacing of the rows of truth.csv, estimate.csv and "
+        "comparison.npz: a whole multiple of sample_interval_s; null (the default) takes "
+        f"the multiple nearest {DEFAULT_OUTPUT_INTERVAL_S:g} s "
+        f"({DEFAULT_OUTPUT_INTERVAL_S:g} s at 0.512 s); sample_interval_s writes every "
+        "sample (s)")
+    telemetry: Literal["auto", True, False] = Field(
+        "auto", description="telemetry.csv at every sample: true, false, or auto = "
+        f"written when duration_s is at most {TELEMETRY_AUTO_MAX_S:g} s (two days); "
+        "`dynprop estimate` needs it")
+
+
+def output_stride(s: Scenario) -> int:
+    """Samples between output rows (``output.interval_s`` / ``sample_interval_s``)."""
+    dt = s.sample_interval_s
+    if s.output.interval_s is None:
+        return max(1, round(DEFAULT_OUTPUT_INTERVAL_S / dt))
+    return max(1, round(s.output.interval_s / dt))
+
+
+def output_writes_telemetry(s: Scenario) -> bool:
+    """Whether `dynprop run` writes telemetry.csv (``output.telemetry``, auto resolved)."""
+    t = s.output.telemetry
+    return t if isinstance(t, bool) else s.duration_s <= TELEMETRY_AUTO_MAX_S + 1e-9
+
+
 class Scenario(_Section):
     name: str = Field(min_length=1, description="short identifier of the scenario")
     description: str = Field("", description="one line shown by `dynprop scenarios`")
@@ -343,6 +385,7 @@ class Scenario(_Section):
     sensors: Sensors = Field(default_factory=Sensors)
     estimator: Estimator = Field(default_factory=Estimator)
     montecarlo: MonteCarlo = Field(default_factory=MonteCarlo)
+    output: Output = Field(default_factory=Output)
 
     @field_validator("dynprop_version", mode="before")
     @classmethod
@@ -366,6 +409,15 @@ class Scenario(_Section):
             # A run needs a step to propagate over; a shorter one writes one-row files.
             problems.append(f"duration_s: {self.duration_s:g} s is shorter than one "
                             f"sample_interval_s ({self.sample_interval_s:g} s)")
+        interval = self.output.interval_s
+        if interval is not None:
+            ratio = interval / self.sample_interval_s
+            k = round(ratio)
+            if k < 1 or abs(ratio - k) > 1e-9 * ratio:
+                near = sorted({max(1, int(np.floor(ratio))), max(1, int(np.ceil(ratio)))})
+                problems.append(f"output.interval_s: {interval:g} s is not a whole multiple of "
+                                f"sample_interval_s ({self.sample_interval_s:g} s); nearest: "
+                                + " or ".join(f"{m * self.sample_interval_s:g}" for m in near))
         for key, d in self.montecarlo.dispersions.items():
             try:
                 check_dispersion(key, leaf_value(self, key), d)

@@ -86,7 +86,7 @@ BAD_MAPPINGS = [
      {"name": "x", "spacecraft": {"inertia_kgm2": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]]}},
      "spacecraft.inertia_kgm2"),
     ("duration-negative", {"name": "x", "duration_s": -1}, "duration_s:"),
-    ("duration-above-30-days", {"name": "x", "duration_s": 30 * 86400 + 1}, "duration_s:"),
+    ("duration-above-366-days", {"name": "x", "duration_s": 366 * 86400 + 1}, "duration_s:"),
     ("sample-interval-zero", {"name": "x", "sample_interval_s": 0}, "sample_interval_s:"),
     ("sample-interval-negative", {"name": "x", "sample_interval_s": -0.512},
      "sample_interval_s:"),
