@@ -118,3 +118,28 @@ def read_csv(path: Path | str) -> dict[str, np.ndarray]:
     if data.shape[1] != len(names):
         raise ValueError(f"{path}: {data.shape[1]} values per row for {len(names)} columns")
     return {name: data[:, k] for k, name in enumerate(names)}
+
+
+class CsvAppender:
+    """A CSV written a window at a time, with the bytes ``write_csv`` gives for the
+    whole table (every row is formatted on its own, so how the rows arrive in
+    blocks changes nothing).  ``close()`` after the last block."""
+
+    def __init__(self, path: Path | str, exact: bool = False):
+        self.path = Path(path)
+        self.fmt = EXACT_FMT if exact else FMT
+        self.fh = open(self.path, "w", newline="")  # noqa: SIM115 (closed by close())
+        self.names: list[str] | None = None
+
+    def append(self, columns: dict[str, np.ndarray]) -> None:
+        if self.names is None:
+            self.names = list(columns)
+            self.fh.write(",".join(self.names) + "\n")
+        elif list(columns) != self.names:
+            raise ValueError(f"{self.path.name}: columns changed between blocks")
+        data = np.column_stack([np.asarray(columns[k], dtype=float) for k in self.names])
+        for i in range(0, len(data), BLOCK_ROWS):
+            self.fh.write(_format_block(data[i:i + BLOCK_ROWS], self.fmt))
+
+    def close(self) -> None:
+        self.fh.close()

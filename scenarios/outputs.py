@@ -104,57 +104,81 @@ def summarize(s: Scenario, runs, t_s, yaw_present, nees_data) -> dict:
     A figure that needs the truth (``estimate`` without ``--truth``) or the linear
     twin (``estimate``) is null, so every summary has the same keys.  No wall-clock
     time: the same scenario and seed must give the same bytes."""
-    p = runs.params
     truth, twin = runs.truth_model is not None, runs.linear is not None
     err = runs.real.x - runs.truth_model if truth else None
     err_lin = runs.linear.x - runs.twin_model if twin else None
     sig = runs.real.sigma
-    dt = s.sample_interval_s
-    gaps = sun_gaps(yaw_present, dt, s.estimator.sun_gap_min_h)
+    gaps = sun_gaps(yaw_present, s.sample_interval_s, s.estimator.sun_gap_min_h)
     ends = [b for _, b in gaps if b < len(t_s)]
-    eq55 = eq55_sigma_yaw_deg(s, p)
     _, n_real, n_lin = nees_data
     nees_b = chi2_bounds(N_STATES, 1)
 
     def when(ok, value):
         return value() if ok else None
 
-    per_state = when(truth, lambda: _per_state(np.mean(
-        (err / np.maximum(sig, 1e-300))[::NEES_STRIDE] ** 2, axis=0)))
-    summary = {
-        "scenario": s.name, "seed": s.seed, "epoch_utc": s.epoch_utc,
-        "duration_s": s.duration_s, "dynprop_version": __version__,
-        "backend": runs.real.backend, "linear_twin": twin, "truth": truth,
-        "yaw_error_rms_deg": when(truth, lambda: _rms(err[:, Y]) * RAD2DEG),
-        "nees_mean_per_state": per_state,
-        "yaw_error_rms_linear_deg": when(twin, lambda: _rms(err_lin[:, Y]) * RAD2DEG),
-        "roll_error_rms_deg": when(truth, lambda: _rms(err[:, R]) * RAD2DEG),
-        "h_error_rms_Nms": when(truth, lambda: _rms(err[:, 4])),
-        "yaw_error_rms_smoothed_deg": when(
+    f = {
+        "yaw_rms": when(truth, lambda: _rms(err[:, Y]) * RAD2DEG),
+        "per_state": when(truth, lambda: np.mean(
+            (err / np.maximum(sig, 1e-300))[::NEES_STRIDE] ** 2, axis=0)),
+        "yaw_rms_linear": when(twin, lambda: _rms(err_lin[:, Y]) * RAD2DEG),
+        "roll_rms": when(truth, lambda: _rms(err[:, R]) * RAD2DEG),
+        "h_rms": when(truth, lambda: _rms(err[:, 4])),
+        "yaw_rms_smoothed": when(
             truth and runs.smoothed is not None,
             lambda: _rms(runs.smoothed.x[:, Y] - runs.truth_model[:, Y]) * RAD2DEG),
-        "sun_gaps_h": [[a * dt / 3600, b * dt / 3600] for a, b in gaps],
-        "yaw_error_at_gap_end_deg": when(truth, lambda: [float(err[b, Y] * RAD2DEG)
-                                                          for b in ends]),
-        "yaw_error_linear_at_gap_end_deg": when(twin, lambda: [float(err_lin[b, Y] * RAD2DEG)
-                                                                for b in ends]),
-        "yaw_sigma_at_gap_end_deg": [float(sig[b, Y] * RAD2DEG) for b in ends],
-        "yaw_within_3sigma_at_gap_ends": when(truth, lambda: bool(all(
-            abs(err[b, Y]) <= 3 * sig[b, Y] for b in ends))),
-        "analytic_sigma_yaw_deg": eq55,
-        "last_gap_end_sigma_over_eq55": (float(sig[ends[-1], Y] * RAD2DEG / eq55)
-                                         if ends else None),
-        "nonlinear_vs_linear": when(truth and twin, lambda: _comparison(err, err_lin)),
+        "gaps": gaps,
+        "end_err": when(truth, lambda: [float(err[b, Y] * RAD2DEG) for b in ends]),
+        "end_err_linear": when(twin, lambda: [float(err_lin[b, Y] * RAD2DEG) for b in ends]),
+        "end_sigma": [float(sig[b, Y] * RAD2DEG) for b in ends],
+        "ends_within": when(truth, lambda: bool(all(abs(err[b, Y]) <= 3 * sig[b, Y]
+                                                    for b in ends))),
+        "comparison": when(truth and twin, lambda: _comparison(err, err_lin)),
         "nees_mean": when(truth, lambda: float(np.mean(n_real))),
         "nees_mean_linear": when(twin, lambda: float(np.mean(n_lin))),
+        "nees_inside": when(truth, lambda: fraction_inside(n_real, nees_b)),
+        "nees_inside_linear": when(twin, lambda: fraction_inside(n_lin, nees_b)),
+        "nis": _nis_means(runs.real),
+        "nis_linear": when(twin, lambda: _nis_means(runs.linear)),
+    }
+    return assemble_summary(s, runs.params, runs.real.backend, truth, twin, f)
+
+
+def assemble_summary(s: Scenario, params, backend: str, truth: bool, twin: bool, f: dict
+                     ) -> dict:
+    """summary.json's dict from the run's figures ``f`` (``summarize`` computes them
+    from whole arrays, ``accumulate.RunFigures`` window by window): one key order,
+    one set of keys, whichever computed them."""
+    dt = s.sample_interval_s
+    eq55 = eq55_sigma_yaw_deg(s, params)
+    nees_b = chi2_bounds(N_STATES, 1)
+    end_sigma = f["end_sigma"]
+    return {
+        "scenario": s.name, "seed": s.seed, "epoch_utc": s.epoch_utc,
+        "duration_s": s.duration_s, "dynprop_version": __version__,
+        "backend": backend, "linear_twin": twin, "truth": truth,
+        "yaw_error_rms_deg": f["yaw_rms"],
+        "nees_mean_per_state": None if f["per_state"] is None else _per_state(f["per_state"]),
+        "yaw_error_rms_linear_deg": f["yaw_rms_linear"],
+        "roll_error_rms_deg": f["roll_rms"],
+        "h_error_rms_Nms": f["h_rms"],
+        "yaw_error_rms_smoothed_deg": f["yaw_rms_smoothed"],
+        "sun_gaps_h": [[a * dt / 3600, b * dt / 3600] for a, b in f["gaps"]],
+        "yaw_error_at_gap_end_deg": f["end_err"],
+        "yaw_error_linear_at_gap_end_deg": f["end_err_linear"],
+        "yaw_sigma_at_gap_end_deg": end_sigma,
+        "yaw_within_3sigma_at_gap_ends": f["ends_within"],
+        "analytic_sigma_yaw_deg": eq55,
+        "last_gap_end_sigma_over_eq55": (float(end_sigma[-1] / eq55) if end_sigma else None),
+        "nonlinear_vs_linear": f["comparison"],
+        "nees_mean": f["nees_mean"],
+        "nees_mean_linear": f["nees_mean_linear"],
         "nees_dof": N_STATES, "nees_bounds_95_per_sample": nees_b,
-        "nees_fraction_inside_95": when(truth, lambda: fraction_inside(n_real, nees_b)),
-        "nees_fraction_inside_95_linear": when(twin, lambda: fraction_inside(n_lin, nees_b)),
-        "nis_mean": _nis_means(runs.real),
-        "nis_mean_linear": when(twin, lambda: _nis_means(runs.linear)),
+        "nees_fraction_inside_95": f["nees_inside"],
+        "nees_fraction_inside_95_linear": f["nees_inside_linear"],
+        "nis_mean": f["nis"],
+        "nis_mean_linear": f["nis_linear"],
         "nis_bounds_95_per_sample": chi2_bounds(1, 1),
     }
-    return summary
 
 
 def write_summary(path: Path, summary: dict) -> None:

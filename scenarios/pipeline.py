@@ -103,6 +103,16 @@ def propagate_lti(Phi, Gamma, x0, u) -> np.ndarray:
     return aux
 
 
+def propagate_lti_final(Phi, Gamma, x0, u) -> tuple[np.ndarray, np.ndarray]:
+    """``propagate_lti``'s states at every sample, and the state one step after the
+    last (where a following window starts)."""
+    Phi, Gamma = np.asarray(Phi, float), np.asarray(Gamma, float)
+    p = np.concatenate([Phi.ravel(order="F"), Gamma.ravel(order="F")])
+    states, aux = _linear_engine(*Gamma.shape).run(np.asarray(x0, float),
+                                                   [np.asarray(u, float)], p)
+    return aux, states[-1]
+
+
 def propagate_linear(disc, x0, u) -> np.ndarray:
     """The linear model's states at every sample (N, 9), exact for ZOH inputs."""
     return propagate_lti(disc.Phi, disc.Gamma, x0, u)
@@ -163,18 +173,15 @@ def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
     return out
 
 
-def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
-                     sun_head=None, rows=None) -> tuple[FilterResult, dict]:
-    """Preprocess telemetry arrays and run the filter; returns the result (the
-    history only at ``rows`` if given) and what the smoother needs besides it
-    (``rts_smoother(result, disc, **that)``: the inputs u and any dropout noise)."""
+def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None):
+    """Telemetry arrays to the filter's measurements, inputs u and any dropout noise
+    (``ExtraNoise`` or None)."""
     e = s.estimator
     if yaw_sigma is not None and sun_head is not None:
         yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
     inputs = prepare(params, s.sample_interval_s, roll, yaw, speeds, build.yaw_factors(s),
                      build.estimator_sensor_specs(s), yaw_sigma, e.model_torques.roll_Nm,
                      e.model_torques.yaw_Nm, e.wheel_torque_window_s)
-    x0, P0 = initial_prior(s, params)
     extra = None
     if inputs.wheel_noise is not None:
         unit = discretize(params, em.ProcessNoise(q_x=0.0, q_z=0.0, q_w=1.0),
@@ -182,9 +189,18 @@ def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=Non
         # The bridge's measured q_w is the whole wheel-torque uncertainty there; the
         # filter's own q_w already carries part of it.
         extra = ExtraNoise(np.maximum(inputs.wheel_noise - e.process_noise.q_w, 0.0), unit)
-    result = kalman_filter(inputs.measurements, disc, x0, P0, u=inputs.u, rows=rows,
-                           extra=extra)
-    return result, {"u": inputs.u, "extra": extra}
+    return inputs.measurements, inputs.u, extra
+
+
+def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
+                     sun_head=None, rows=None) -> tuple[FilterResult, dict]:
+    """Preprocess telemetry arrays and run the filter; returns the result (the
+    history only at ``rows`` if given) and what the smoother needs besides it
+    (``rts_smoother(result, disc, **that)``: the inputs u and any dropout noise)."""
+    meas, u, extra = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head)
+    x0, P0 = initial_prior(s, params)
+    result = kalman_filter(meas, disc, x0, P0, u=u, rows=rows, extra=extra)
+    return result, {"u": u, "extra": extra}
 
 
 FALLBACK_YAW_SIGMA_DEG = 1.0  # yaw σ for files without a yaw_sigma_deg column

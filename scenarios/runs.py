@@ -34,12 +34,16 @@ from .schema import Scenario
 def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = None) -> dict:
     """Everything of one `dynprop run` into ``stage``; returns the summary.
 
-    With ``montecarlo_case`` K the spacecraft that flies is case K of the scenario's
-    dispersions, with case K's noise streams; the filter stays nominal.  Then
+    A plain run streams in windows (``streamrun``).  With ``montecarlo_case`` K
+    the spacecraft that flies is case K of the scenario's dispersions, with case
+    K's noise streams; the filter stays nominal; every sample is kept.  Then
     scenario.yaml is the nominal scenario (rerun it with the same K), and
     case_scenario.yaml and montecarlo_case.json/.npz hold the case: the latter
     exactly what `dynprop montecarlo` stores for case K."""
     case = montecarlo_case
+    if case is None:
+        from .streamrun import stream_to_directory
+        return stream_to_directory(s, stage)
     flying, dispersed = s, None
     if case is not None:
         from .montecarlo.dispersions import draw_case
@@ -140,6 +144,8 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     np.savez(stage / "comparison.npz",
              **comparison_arrays(runs, t, present, nees_data, grid.columns))
     summary = summarize(s, runs, t, present, nees_data)
+    # One key set for every summary: `run`'s output keys, for a file filtered row by row.
+    summary.update(output_interval_s=s.sample_interval_s, telemetry_written=None, daily=None)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s)}
     from .plotting import plot_run_figures
     plot_run_figures(stage)

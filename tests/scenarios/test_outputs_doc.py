@@ -76,19 +76,23 @@ def csv_columns(path: Path) -> list[str]:
 
 @pytest.fixture(scope="module")
 def written(tmp_path_factory) -> dict[str, Path]:
-    """Ten minutes of each command (a Monte Carlo case included)."""
+    """Ten minutes of each command (a Monte Carlo case included; `run` at its default
+    output cadence, whose comparison.npz has the envelopes, and at every sample)."""
     base = tmp_path_factory.mktemp("outputs-doc")
     dirs = {}
     for name, argv in (("run", ("run", "goes_next_equinox", "--duration-s", "600")),
+                       # every sample, which `estimate --truth` needs of truth.csv
+                       ("run_full", ("run", "goes_next_equinox", "--duration-s", "600",
+                                     "--set", "output.interval_s=0.512")),
                        ("case", ("run", "goes_next_equinox", "--duration-s", "600",
                                  "--montecarlo-case", "1")),
                        ("simulate", ("simulate", "backup_wheel", "--duration-s", "600"))):
         rc, _, err = run_cli(*argv, "--out", str(base / name))
         assert rc == 0, err
         dirs[name] = base / name
-    rc, _, err = run_cli("estimate", str(dirs["run"] / "telemetry.csv"), "--scenario",
-                         str(dirs["run"] / "scenario.yaml"), "--truth",
-                         str(dirs["run"] / "truth.csv"), "--out", str(base / "estimate"))
+    rc, _, err = run_cli("estimate", str(dirs["run_full"] / "telemetry.csv"), "--scenario",
+                         str(dirs["run_full"] / "scenario.yaml"), "--truth",
+                         str(dirs["run_full"] / "truth.csv"), "--out", str(base / "estimate"))
     assert rc == 0, err
     dirs["estimate"] = base / "estimate"
     return dirs

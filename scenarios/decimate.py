@@ -1,0 +1,136 @@
+"""comparison.npz at the output cadence, written window by window.
+
+Row i is the sample i·stride (``output.interval_s``), every value the one at that
+sample, exactly what ``comparison.comparison_arrays`` gives for it.  When rows are
+decimated (stride > 1), the series whose peaks matter also get a min/max envelope
+per output interval (``<key>_min``, ``<key>_max``: over the samples of row i up
+to row i+1, NaN where none is finite), so a gap-end error or a NEES spike between
+two rows still shows in the figures; NEES is computed every ``NEES_STRIDE``
+samples and its envelope covers those.
+
+Each key is a ``.npy`` memory map in a scratch folder of the run, so memory does
+not grow with the run; ``finish`` stores them into comparison.npz (a zip of .npy
+files, as ``np.savez`` makes, with fixed timestamps so the bytes repeat).
+"""
+
+from __future__ import annotations
+
+import shutil
+import zipfile
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from estimator.kalman import FilterResult
+from estimator.model import H_WHEEL, R, Y
+
+from .comparison import comparison_arrays
+from .outputs import NEES_STRIDE, display_factors
+
+ENVELOPED = ("err_real", "err_linear", "err_real_minus_linear", "err_smoothed",
+             "nees_real", "nees_linear")
+DIFF_COLS = [R, Y, H_WHEEL]
+
+
+def output_rows(start: int, stop: int, stride: int) -> np.ndarray:
+    """Global sample indices of the output rows within [start, stop)."""
+    return np.arange(-(-start // stride) * stride, stop, stride)
+
+
+def _at(result, k) -> FilterResult:
+    return FilterResult(result.x[k], result.P_packed[k], result.innovations[k],
+                        result.innovation_var[k], result.x_next, result.P_next, result.backend)
+
+
+class ComparisonRows:
+    def __init__(self, folder: Path, n_samples: int, stride: int):
+        self.folder = Path(folder)
+        self.folder.mkdir()
+        self.stride = stride
+        self.n_rows = -(-n_samples // stride)
+        self.maps: dict[str, np.ndarray] = {}
+
+    def _map(self, key: str, shape, dtype, fill=np.nan) -> np.ndarray:
+        if key not in self.maps:
+            m = np.lib.format.open_memmap(self.folder / f"{key}.npy", mode="w+", dtype=dtype,
+                                          shape=(self.n_rows, *shape))
+            m[...] = fill
+            self.maps[key] = m
+        return self.maps[key]
+
+    def add(self, rec: dict, nees_idx, nees_real, nees_lin) -> None:
+        a = rec["start"]
+        n = len(rec["t_s"])
+        rows = output_rows(a, a + n, self.stride)
+        k = rows - a
+        at_nees = np.isin(rows, nees_idx)
+        pick = np.searchsorted(nees_idx, rows[at_nees])
+        runs = SimpleNamespace(
+            params=rec["params"], real=_at(rec["real"], k),
+            smoothed=None if rec.get("smoothed") is None else SimpleNamespace(
+                x=rec["smoothed"].x[k]),
+            linear=None if rec.get("linear") is None else SimpleNamespace(
+                x=rec["linear"].x[k]),
+            truth_model=rec["truth_model"][k],
+            twin_model=None if rec.get("twin_model") is None else rec["twin_model"][k],
+            sim=SimpleNamespace(truth=SimpleNamespace(euler_rad=rec["euler_rows"])))
+        present = np.isfinite(rec["meas"][1][k])
+        nees_data = (np.flatnonzero(at_nees), nees_real[pick],
+                     None if nees_lin is None else nees_lin[pick])
+        arrays = comparison_arrays(runs, rec["t_s"][k], present, nees_data, rec["tel_rows"])
+        lo = rows[0] // self.stride if len(rows) else None
+        for key, v in arrays.items():
+            if lo is not None:
+                self._map(key, v.shape[1:], v.dtype)[lo:lo + len(rows)] = v
+        if self.stride > 1:
+            self._envelopes(rec, a, n, nees_idx, nees_real, nees_lin)
+
+    def _envelopes(self, rec, a, n, nees_idx, nees_real, nees_lin) -> None:
+        f = display_factors(rec["params"].omega_n_radps)
+        err = rec["real"].x - rec["truth_model"]
+        series = {"err_real": (np.arange(a, a + n), err * f)}
+        if rec.get("linear") is not None:
+            err_lin = rec["linear"].x - rec["twin_model"]
+            series["err_linear"] = (series["err_real"][0], err_lin * f)
+            series["err_real_minus_linear"] = (series["err_real"][0],
+                                               (err - err_lin)[:, DIFF_COLS] * f[DIFF_COLS])
+            series["nees_linear"] = (nees_idx, nees_lin)
+        if rec.get("smoothed") is not None:
+            series["err_smoothed"] = (series["err_real"][0],
+                                      (rec["smoothed"].x - rec["truth_model"]) * f)
+        series["nees_real"] = (nees_idx, nees_real)
+        for key, (idx, v) in series.items():
+            if len(idx) == 0:
+                continue
+            ids = idx // self.stride
+            starts = np.r_[0, np.flatnonzero(np.diff(ids)) + 1]
+            rows = ids[starts]
+            for suffix, op in (("_min", np.fmin), ("_max", np.fmax)):
+                m = self._map(key + suffix, v.shape[1:], np.float32)
+                red = op.reduceat(v, starts, axis=0).astype(np.float32)
+                # A row whose interval began in the previous window keeps its part.
+                red[0] = op(red[0], m[rows[0]])
+                m[rows] = red
+
+    def finish(self, path: Path, interval_s: float) -> None:
+        """Write comparison.npz and remove the scratch folder."""
+        if self.stride > 1:
+            np.save(self.folder / "output_interval_s.npy", np.asarray(interval_s, dtype=float))
+            self.maps["output_interval_s"] = None
+        for m in self.maps.values():
+            if m is not None:
+                m.flush()
+        tmp = path.with_name(f".{path.name}.tmp")
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for key in self.maps:
+                info = zipfile.ZipInfo(f"{key}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                with open(self.folder / f"{key}.npy", "rb") as src, \
+                        zf.open(info, "w", force_zip64=True) as dst:
+                    shutil.copyfileobj(src, dst, 1 << 20)
+        self.maps.clear()
+        shutil.rmtree(self.folder)
+        tmp.replace(path)
+
+
+__all__ = ["ENVELOPED", "NEES_STRIDE", "ComparisonRows", "output_rows"]

@@ -1,0 +1,318 @@
+"""`dynprop run` in windows: truth → telemetry → the paper's filter and the linear
+twin, a window at a time, so that memory does not grow with the duration.
+
+A run of at most ``SINGLE_WINDOW_S`` (two days) is one window, and every array is
+the one the whole-array pipeline (``pipeline.run_scenario``) computes, bit for
+bit.  A longer run is cut into whole days (the remainder joins the last day).
+Across a window boundary the truth, its telemetry and both filters continue
+exactly as in one long array: the rollout state and every random generator are
+carried (``sim.truth.TruthStream``), the wheel-torque derivative is taken on the
+window padded with its neighbours' samples, and each filter starts from the
+prior the previous window ended with.  Three things are per window by design:
+
+- the "true" torque states (``pipeline.truth_torques``): the model's constant +
+  orbit-rate form (Eqs. 9, 18) is fitted per window, as the torques change with
+  the season and one fit over a year would describe none of its days;
+- the linear twin's torque states are set to the new window's fit at its first
+  sample (its attitude states carry on), so its total torque stays the truth's;
+- the RTS smoother runs backwards over the window and ``SMOOTHER_OVERLAP_S`` of
+  the next one, starting there from the filtered estimate.
+
+Stages are generators over window records (dicts), chained in ``windows_of``;
+``producer`` (truth, telemetry, twin) can run in a second process.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from estimator import model as em
+from estimator.consistency import nees
+from estimator.kalman import (
+    ExtraNoise,
+    FilterResult,
+    kalman_filter,
+    rts_smoother,
+    unpack,
+)
+from estimator.transition import discretize
+from sim.frames import dcm_from_euler312
+from sim.telemetry import make_telemetry
+from sim.truth import TruthStream
+
+from . import build
+from .columns import telemetry_columns, truth_columns
+from .csvio import CsvAppender
+from .decimate import output_rows
+from .pipeline import (
+    filter_inputs,
+    initial_prior,
+    model_truth,
+    propagate_lti_final,
+    telemetry_inputs,
+    truth_torques,
+)
+from .schema import Scenario, output_stride
+
+DAY_S = 86400.0
+SINGLE_WINDOW_S = 2 * DAY_S
+SMOOTHER_OVERLAP_S = 12 * 3600.0
+
+
+def window_bounds(n_samples: int, dt_s: float, window_samples: int | None = None
+                  ) -> list[tuple[int, int]]:
+    """[start, stop) sample ranges: one window up to two days, else whole days with
+    the remainder (if under half a day) joined to the last one."""
+    if window_samples is None:
+        if (n_samples - 1) * dt_s <= SINGLE_WINDOW_S + 1e-9:
+            return [(0, n_samples)]
+        window_samples = int(round(DAY_S / dt_s))
+    starts = list(range(0, n_samples, window_samples))
+    if len(starts) > 1 and n_samples - starts[-1] < window_samples // 2:
+        starts.pop()
+    return list(zip(starts, starts[1:] + [n_samples], strict=True))
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What every stage needs to know of the run, built once from the scenario."""
+
+    n_samples: int
+    bounds: list[tuple[int, int]]
+    stride: int                 # output rows every ``stride`` samples
+    pad: int                    # samples of each neighbour the wheel-torque fit needs
+    overlap: int                # samples of the next window the smoother runs over
+
+
+def make_plan(s: Scenario, n_samples: int, window_samples: int | None = None) -> Plan:
+    dt = s.sample_interval_s
+    bounds = window_bounds(n_samples, dt, window_samples)
+    stride = output_stride(s)
+    pad = int(round(s.estimator.wheel_torque_window_s / dt)) // 2 + 1
+    overlap = max(pad, int(round(SMOOTHER_OVERLAP_S / dt)))
+    return Plan(n_samples, bounds, stride, pad, overlap)
+
+
+def _truth_stream(s: Scenario, run: int) -> TruthStream:
+    rngs = build.streams(s.seed, run)
+    return TruthStream(build.build_spacecraft(s), build.orbit(s), build.build_environment(s),
+                       build.build_control(s), build.build_initial(s), build.epoch(s),
+                       s.duration_s, s.sample_interval_s, rng=rngs.pop("ripple"))
+
+
+def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
+             out: Path | None = None, telemetry_file: bool = False):
+    """Truth, telemetry and the linear twin, window by window (see the module doc).
+
+    Yields the plan first, then one record per window: ``start``, ``stop``, ``t_s``;
+    ``meas`` and ``twin_meas`` (telemetry in SI for the filters: the real one as
+    telemetry.csv writes it); ``truth_model`` and ``twin_model``; ``shadow``; and at
+    the output rows ``tel_rows`` (telemetry.csv's columns) and ``euler_rows``.
+    With ``out`` it writes truth.csv at the output rows and, if ``telemetry_file``,
+    telemetry.csv at every sample there."""
+    stream = _truth_stream(s, run)
+    plan = make_plan(s, stream.n_samples, window_samples)
+    yield plan
+    suite = build.build_sensors(s)
+    rngs = build.streams(s.seed, run)
+    twin_rngs = build.streams(s.seed, run)   # the twin's noise draws equal the real ones
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, s.sample_interval_s)
+    mt = s.estimator.model_torques
+    min_sep = s.sensors.sun.min_sun_separation_deg
+    files = {}
+    if out is not None:
+        files["truth"] = CsvAppender(Path(out) / "truth.csv")
+        if telemetry_file:
+            files["telemetry"] = CsvAppender(Path(out) / "telemetry.csv", exact=True)
+    pending = None
+    twin_x = None
+    try:
+        for index in range(len(plan.bounds) + 1):
+            current = None
+            if index < len(plan.bounds):
+                a, b = plan.bounds[index]
+                truth = stream.window(a, b)
+                tel = make_telemetry(truth, suite, rngs, min_sep)
+                tt = truth_torques(truth, mt, params.omega0_radps)
+                rows = output_rows(a, b, plan.stride) - a
+                tel_cols = telemetry_columns(tel, suite)
+                if "truth" in files:
+                    files["truth"].append({k: v[rows] for k, v in
+                                           truth_columns(truth, tel.sun_visible).items()})
+                if "telemetry" in files:
+                    files["telemetry"].append(tel_cols)
+                current = {"index": index, "start": a, "stop": b, "t_s": truth.t_s,
+                           "truth": truth, "tt": tt,
+                           "meas": telemetry_inputs(s, tel_cols),
+                           "tel_rows": {k: v[rows] for k, v in tel_cols.items()},
+                           "truth_model": model_truth(params, truth, tt),
+                           "shadow": truth.shadow,
+                           "euler_rows": truth.euler_rad[rows]}
+                del tel, tel_cols
+            if pending is not None:
+                # The twin's last step needs the next window's first h (its wheel torque).
+                h_next = None if current is None else current["truth"].h_Nms[0]
+                twin_x = _twin(s, params, disc, pending, h_next, twin_x, twin_rngs, suite, mt,
+                               min_sep)
+                del pending["truth"], pending["tt"]
+                yield pending
+            pending = current
+    finally:
+        for f in files.values():
+            f.close()
+
+
+def _twin(s, params, disc, rec, h_next, x_prev, rngs, suite, mt, min_sep) -> np.ndarray:
+    """The twin over one window (``pipeline.linear_twin`` with carried state and
+    generators); fills ``twin_model`` and ``twin_meas`` and returns the next state."""
+    truth, tt, dt = rec["truth"], rec["tt"], s.sample_interval_s
+    h = truth.h_Nms if h_next is None else np.append(truth.h_Nms, h_next)
+    nw = np.diff(h) / dt
+    if h_next is None:
+        nw = np.append(nw, 0.0)
+    u = em.input_vector(params, mt.roll_Nm + tt.res_x, mt.yaw_Nm + tt.res_z, nw)
+    if x_prev is None:
+        x0 = model_truth(params, truth, tt, [0])[0]
+    else:
+        x0 = x_prev.copy()
+        x0[em.NPX:] = tt.torque_states[0]     # the new window's fit (module doc)
+    twin, x_next = propagate_lti_final(disc.Phi, disc.Gamma, x0, u)
+    k = build.yaw_factors(s)
+    speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms,
+                                                 k / (k @ k))
+    c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)
+    twin_truth = SimpleNamespace(
+        t_s=truth.t_s, roll_rad=twin[:, em.R], pitch_rad=truth.pitch_rad,
+        wheel_speeds_radps=speeds, shadow=truth.shadow, sun_orbit_frame=truth.sun_orbit_frame,
+        sun_body=np.einsum("nij,nj->ni", c_br, truth.sun_orbit_frame))
+    tel = make_telemetry(twin_truth, suite, rngs, min_sep)
+    head = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
+    rec["twin_model"] = twin
+    rec["twin_meas"] = (tel.roll_rad, tel.yaw_rad, tel.wheel_speeds_radps, tel.yaw_sigma_rad,
+                        head)
+    return x_next
+
+
+def _padded_inputs(s, params, plan: Plan, prev, cur, nxt, key: str):
+    """Filter inputs of ``cur`` from its telemetry padded with ``plan.pad`` samples of
+    each neighbour, so the wheel-torque derivative equals the whole run's."""
+    lo = 0 if prev is None else plan.pad
+    n = len(cur[key][0])
+
+    def cut(m, which):
+        arrays = m[key]
+        if which == "tail":
+            return [None if v is None else v[-plan.pad:] for v in arrays]
+        if which == "head":
+            return [None if v is None else v[:plan.pad] for v in arrays]
+        return list(arrays)
+
+    pieces = ([cut(prev, "tail")] if prev is not None else []) + [cut(cur, "all")] + \
+        ([cut(nxt, "head")] if nxt is not None else [])
+    joined = [None if pieces[0][i] is None else np.concatenate([p[i] for p in pieces])
+              for i in range(len(pieces[0]))]
+    meas, u, extra = filter_inputs(s, params, *joined)
+    sl = slice(lo, lo + n)
+    meas = type(meas)(*(v[sl] if np.ndim(v) else v for v in
+                        (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll, meas.var_yaw,
+                         meas.var_h)))
+    if extra is not None:
+        extra = ExtraNoise(extra.scale[sl], extra.Qd_unit)
+    return meas, u[sl], extra
+
+
+def filtered(s: Scenario, records, names=("real", "linear")):
+    """The filters ``names`` ("real" on ``meas``, "linear" on ``twin_meas``) over each
+    window, each continuing from the prior the previous window ended with.  Adds
+    the FilterResult under its name and its inputs (u, extra) as ``<name>_in``."""
+    plan = next(records)
+    yield plan
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, s.sample_interval_s)
+    x0, P0 = initial_prior(s, params)
+    keys = {"real": "meas", "linear": "twin_meas"}
+    priors = {name: (x0, P0) for name in names}
+    prev, cur = None, next(records, None)
+    while cur is not None:
+        nxt = next(records, None)
+        for name in names:
+            meas, u, extra = _padded_inputs(s, params, plan, prev, cur, nxt, keys[name])
+            result = kalman_filter(meas, disc, *priors[name], u=u, extra=extra)
+            priors[name] = (result.x_next, result.P_next)
+            cur[name], cur[f"{name}_in"] = result, (u, extra)
+        cur["params"] = params
+        # The next window's derivative needs only the last samples of this one.
+        prev = {keys[name]: tuple(None if v is None else v[-plan.pad:]
+                                  for v in cur[keys[name]]) for name in names}
+        if "linear" in names:
+            _lighten_twin(cur)
+        yield cur
+        cur = nxt
+
+
+def _lighten_twin(rec: dict) -> None:
+    """What the summary and figures need of the twin's filter, once the next window
+    no longer needs its telemetry: its NEES (computed here), estimates and
+    innovations, not its covariance history."""
+    from .accumulate import nees_rows
+    a, n = rec["start"], len(rec["t_s"])
+    idx = nees_rows(a, a + n)
+    lin = rec["linear"]
+    k = idx - a
+    rec["nees_linear"] = nees(lin.x[k], unpack(lin.P_packed[k]), rec["twin_model"][k])
+    rec["linear"] = SimpleNamespace(x=lin.x, innovations=lin.innovations,
+                                    innovation_var=lin.innovation_var, backend=lin.backend)
+    rec.pop("twin_meas", None)
+    rec.pop("linear_in", None)
+
+
+def _join_results(a: FilterResult, b: FilterResult, n: int) -> FilterResult:
+    cat = [np.concatenate([getattr(a, k), getattr(b, k)[:n]])
+           for k in ("x", "P_packed", "innovations", "innovation_var")]
+    return FilterResult(*cat, b.x_next, b.P_next, a.backend)
+
+
+def smoothed(s: Scenario, records, smooth: bool = True):
+    """The RTS smoother over each window and ``plan.overlap`` samples of the next
+    (one window: the whole run, exactly ``rts_smoother``).  Adds ``smoothed``."""
+    plan = next(records)
+    yield plan
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, s.sample_interval_s)
+    cur = next(records, None)
+    while cur is not None:
+        nxt = next(records, None)
+        if smooth:
+            result, (u, extra) = cur["real"], cur["real_in"]
+            if nxt is not None:
+                n = min(plan.overlap, len(nxt["t_s"]))
+                u_n, extra_n = nxt["real_in"]
+                result = _join_results(result, nxt["real"], n)
+                u = np.concatenate([u, u_n[:n]])
+                if extra is not None or extra_n is not None:
+                    unit = (extra or extra_n).Qd_unit
+                    scale = [np.zeros(m) if e is None else e.scale[:m]
+                             for e, m in ((extra, len(cur["t_s"])), (extra_n, n))]
+                    extra = ExtraNoise(np.concatenate(scale), unit)
+            sm = rts_smoother(result, disc, u=u, extra=extra)
+            m = len(cur["t_s"])
+            # `run` reports the smoothed estimate, not its covariance: drop it now.
+            cur["smoothed"] = SimpleNamespace(x=sm.x[:m].copy())
+            del sm
+        else:
+            cur["smoothed"] = None
+        yield cur
+        cur = nxt
+
+
+def windows_of(s: Scenario, run: int = 0, window_samples: int | None = None,
+               records=None, smooth: bool = True):
+    """The chained stages: plan, then one fully processed record per window."""
+    records = records if records is not None else producer(s, run, window_samples)
+    return smoothed(s, filtered(s, filtered(s, records, ("linear",)), ("real",)), smooth)
+

@@ -1,0 +1,194 @@
+"""`dynprop run` streamed in windows (scenarios.stream, streamrun, accumulate, decimate).
+
+Identity is the requirement for what does not depend on the window cut: the truth,
+its telemetry and the real filter continue across a window boundary exactly as in
+one long array (carried rollout state, generators and filter prior; the wheel-torque
+derivative on padded windows).  What is per window by design (the torque-state fit,
+hence the twin and NEES, and the smoother's overlap) is checked against the
+one-window run with tolerances saying how far it may move.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenarios.csvio import read_csv
+from scenarios.loader import load_scenario
+from scenarios.streamrun import stream_to_directory
+
+HOUR = 3600.0
+# 17:00 local at 75° W on the equinox: the night Sun gap (~20:08–04:00 local) falls
+# 3.25–11.1 h into the run; midnight (the eclipse) 7 h in.
+GAP_EPOCH = "epoch_utc=2026-03-20T22:00:00Z"
+
+
+def _run(tmp_path_factory, name, overrides, window_samples=None, processes=1):
+    s = load_scenario("goes_next_equinox", overrides)
+    out = tmp_path_factory.mktemp(name)
+    summary = stream_to_directory(s, out, window_samples=window_samples, processes=processes,
+                                  progress=False)
+    return out, summary
+
+
+FULL = ["duration_s=46800", GAP_EPOCH, "output.interval_s=0.512", "output.telemetry=true"]
+
+
+@pytest.fixture(scope="module")
+def one_window(tmp_path_factory):
+    return _run(tmp_path_factory, "one", FULL)
+
+
+@pytest.fixture(scope="module")
+def windows(tmp_path_factory):
+    # Two windows (6.4 h, 6.6 h): the boundary inside the Sun gap, at the eclipse; the
+    # producer in its own process, as `dynprop run` runs it.
+    return _run(tmp_path_factory, "many", FULL, window_samples=45_000, processes=2)
+
+
+@pytest.fixture(scope="module")
+def decimated(tmp_path_factory):
+    return _run(tmp_path_factory, "dec", ["duration_s=46800", GAP_EPOCH,
+                                          "output.interval_s=64"], window_samples=45_000)
+
+
+@pytest.mark.parametrize("name", ["truth.csv", "telemetry.csv", "estimate.csv"])
+def test_windows_continue_the_truth_telemetry_and_filter_exactly(one_window, windows, name):
+    assert (one_window[0] / name).read_bytes() == (windows[0] / name).read_bytes()
+
+
+def test_per_window_figures_stay_close_to_the_one_window_run(one_window, windows):
+    a, b = one_window[1], windows[1]
+    # The filter and the truth's attitude are identical; only the order of the sums
+    # changes (a few ulps).
+    for key in ("yaw_error_rms_deg", "roll_error_rms_deg", "h_error_rms_Nms"):
+        assert b[key] == pytest.approx(a[key], rel=1e-12)
+    assert b["sun_gaps_h"] == a["sun_gaps_h"] and len(a["sun_gaps_h"]) == 1
+    assert b["yaw_error_at_gap_end_deg"] == a["yaw_error_at_gap_end_deg"]
+    assert b["yaw_sigma_at_gap_end_deg"] == a["yaw_sigma_at_gap_end_deg"]
+    assert b["nis_mean"] == pytest.approx(a["nis_mean"], rel=1e-12)
+    # The linear twin resets its torque states to each window's fit: its gap-end
+    # error moves by a small part of the filter's σ (0.05°).
+    for x, y in zip(a["yaw_error_linear_at_gap_end_deg"], b["yaw_error_linear_at_gap_end_deg"],
+                    strict=True):
+        assert abs(x - y) < 0.1 * a["yaw_sigma_at_gap_end_deg"][0]
+    # The smoother restarts from the filtered estimate 6 h into the next window.
+    assert b["yaw_error_rms_smoothed_deg"] == pytest.approx(a["yaw_error_rms_smoothed_deg"],
+                                                            rel=0.05)
+    assert 0.5 * a["nees_mean"] < b["nees_mean"] < 2.0 * a["nees_mean"]
+
+
+def test_decimated_rows_are_the_full_rate_samples_and_envelopes_hold_the_peaks(
+        one_window, decimated):
+    with np.load(one_window[0] / "comparison.npz") as f, \
+            np.load(decimated[0] / "comparison.npz") as d:
+        full, dec = dict(f), dict(d)
+    stride = 125  # 64 s / 0.512 s
+    assert float(dec["output_interval_s"]) == 64.0
+    assert np.array_equal(dec["t_s"], full["t_s"][::stride])
+    for key in ("x_real", "sigma", "true_euler_deg", "tel_yaw_deg", "yaw_present"):
+        assert np.array_equal(dec[key], full[key][::stride], equal_nan=True), key
+    # The real filter's attitude and h errors do not depend on windows (the torque
+    # states' "truth" is fitted per window): rows and envelopes exactly.
+    n = len(dec["t_s"])
+    err = full["err_real"][:, :5]
+    pad = n * stride - len(err)
+    blocks = np.concatenate([err, np.full((pad, 5), np.nan, np.float32)]).reshape(n, stride, 5)
+    assert np.array_equal(dec["err_real"][:, :5], err[::stride])
+    assert np.array_equal(dec["err_real_min"][:, :5], np.nanmin(blocks, axis=1))
+    assert np.array_equal(dec["err_real_max"][:, :5], np.nanmax(blocks, axis=1))
+    # The largest yaw error of the run falls between two rows and still shows.
+    k = int(np.nanargmax(np.abs(err[:, 2])))
+    assert k % stride != 0
+    assert np.nanmax(np.abs(dec["err_real_max"][:, 2])) >= abs(err[k, 2]) \
+        or np.nanmin(dec["err_real_min"][:, 2]) <= err[k, 2]
+    # NEES spikes: the envelope covers every computed NEES.
+    assert np.nanmax(dec["nees_real_max"]) == pytest.approx(np.nanmax(full["nees_real"]),
+                                                            rel=0.5)
+
+
+def test_decimated_csvs_hold_the_rows_at_the_output_interval(one_window, decimated):
+    for name in ("truth.csv", "estimate.csv"):
+        full, dec = read_csv(one_window[0] / name), read_csv(decimated[0] / name)
+        assert np.array_equal(dec["t_s"], full["t_s"][::125])
+        assert np.array_equal(dec["yaw_deg"], full["yaw_deg"][::125], equal_nan=True)
+    # auto: a 13 h run writes its telemetry; the summary says so.
+    assert (decimated[0] / "telemetry.csv").exists()
+    assert json.loads((decimated[0] / "summary.json").read_text())["telemetry_written"]
+
+
+def test_daily_rows_count_the_eclipse_and_the_gap_end(one_window):
+    run, s = one_window
+    daily = read_csv(run / "daily.csv")
+    assert len(daily["day"]) == 1 and daily["day_of_year"][0] == 79   # 2026-03-20
+    truth = read_csv(run / "truth.csv")
+    eclipse_min = np.sum(truth["shadow"] < 1.0) * 0.512 / 60
+    assert 60 < eclipse_min < 80            # the equinox eclipse, ~70 min
+    # daily.csv holds 10 significant digits (each value within 5e-10 of itself).
+    assert daily["eclipse_min"][0] == pytest.approx(eclipse_min, rel=1e-9)
+    for col, key in (("gap_end_yaw_error_deg", "yaw_error_at_gap_end_deg"),
+                     ("gap_end_yaw_sigma_deg", "yaw_sigma_at_gap_end_deg")):
+        assert daily[col][0] == pytest.approx(s[key][0], rel=1e-9)
+    assert daily["sun_gap_end_h"][0] == pytest.approx(s["sun_gaps_h"][0][1], rel=1e-9)
+    assert daily["yaw_error_rms_deg"][0] == pytest.approx(s["yaw_error_rms_deg"], rel=1e-9)
+    assert daily["eq55_sigma_yaw_deg"][0] == pytest.approx(s["analytic_sigma_yaw_deg"],
+                                                           rel=1e-9)
+
+
+def test_a_run_over_two_days_is_cut_into_days_and_reports_them(tmp_path_factory):
+    from scenarios.stream import window_bounds
+    n_day = 168_750
+    assert window_bounds(2 * n_day + 1, 0.512) == [(0, 2 * n_day + 1)]
+    b = window_bounds(3 * n_day + 1, 0.512)
+    assert b == [(0, n_day), (n_day, 2 * n_day), (2 * n_day, 3 * n_day + 1)]
+    b = window_bounds(int(3.6 * n_day), 0.512)
+    assert len(b) == 4 and b[-1][1] == int(3.6 * n_day)
+
+
+def test_no_stage_folder_is_left_in_the_run(decimated):
+    assert not any(p.name.startswith(".") for p in Path(decimated[0]).iterdir())
+
+
+def test_a_long_run_logs_days_and_ctrl_c_mid_stream_leaves_nothing(tmp_path):
+    """Four days (four windows, the producer in its own process), stderr not a
+    terminal: a line per 10 simulated days is too rare here, so the first line is
+    the interrupt's.  Ctrl-C while the second window streams: exit 130, one line,
+    no stage, no process left (the producer would otherwise go on writing)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import psutil
+
+    repo = Path(__file__).resolve().parents[2]
+    out = tmp_path / "runs" / "long"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "scenarios.cli", "run", "goes_next_equinox", "--duration-s",
+         str(4 * 86400), "--out", str(out)], cwd=repo, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.monotonic() + 120
+    stage = None
+    while time.monotonic() < deadline and proc.poll() is None:
+        stages = list(out.parent.glob(".long.stage-*"))
+        # truth.csv grows a window at a time (~0.55 MB a day at 64 s): past one day.
+        if stages and (stages[0] / "truth.csv").exists() \
+                and (stages[0] / "truth.csv").stat().st_size > 600_000:
+            stage = stages[0]
+            break
+        time.sleep(0.02)
+    assert stage is not None, "the run never reached its second window"
+    children = psutil.Process(proc.pid).children(recursive=True)
+    assert children, "the producer runs in a second process"
+    os.killpg(proc.pid, signal.SIGINT)
+    stdout, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, (stdout, err)
+    assert err == "dynprop: interrupted; nothing was written\n", err
+    assert not out.parent.exists() or not any(out.parent.iterdir())
+    gone, alive = psutil.wait_procs(children, timeout=10)
+    assert not alive
