@@ -15,7 +15,17 @@ import numpy as np  # noqa: E402
 from matplotlib.ticker import LogLocator, NullLocator  # noqa: E402
 
 from .decor import GAP_LABEL, dot_handle, figure_legend, shade_mask, time_axis  # noqa: E402
-from .reduce import every, f64, finite, pct, running_mean, runs_of, stride, window  # noqa: E402
+from .reduce import (  # noqa: E402
+    every,
+    f64,
+    finite,
+    minmax_line,
+    pct,
+    running_mean,
+    runs_of,
+    stride,
+    window,
+)
 
 DSS_COLOR = "#f6c77c"
 _NEES_COLORS = {"real": "C3", "linear": "C0"}
@@ -100,6 +110,12 @@ def _nees_panel(ax, t_s, nees: dict, dof: int, bounds, win_s: float) -> None:
         color = _NEES_COLORS[key]
         ax.plot(*stride(t_k, y_k), ".", ms=1.0, color=color, alpha=0.3, zorder=2)
         dot_handle(ax, color, f"NEES {_NEES_NAMES[key]}, per sample")
+        peak = nees.get(f"{key}_max")
+        if peak is not None:   # decimated rows: the largest full-rate NEES of each row
+            y_max = f64(peak)
+            ax.plot(*minmax_line(t_s / 3600.0, y_max), color=color, lw=0.6, alpha=0.6,
+                    zorder=2, label=f"NEES {_NEES_NAMES[key]}, full-rate max per row")
+            values.append(y_max[np.isfinite(y_max)])
         mean = running_mean(y_k, window(t_s[ok], win_s))
         ax.plot(*stride(t_k, mean, 4000), color=color, lw=1.4, zorder=4,
                 label=f"NEES {_NEES_NAMES[key]}, {wlabel}")

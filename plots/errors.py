@@ -73,6 +73,10 @@ def _envelope(ax, t_s, s: dict, interval_s: float) -> None:
     """A noisy error as statistics per interval: the real error's min–max band and
     the ±RMS of each run (real, linearized, smoother)."""
     x, lo, hi, rms = interval_stats(t_s, s["real"], interval_s)
+    if s.get("real_min") is not None:
+        # Decimated rows: the band is the full-rate min–max the run stored per row.
+        lo = interval_stats(t_s, s["real_min"], interval_s)[1]
+        hi = interval_stats(t_s, s["real_max"], interval_s)[2]
     ax.fill_between(x, lo, hi, color=REAL, alpha=0.25, lw=0, zorder=2,
                     label=f"real, min–max per {_minutes(interval_s)}")
     if s.get("linear") is not None:
@@ -91,6 +95,11 @@ def _traces(ax, t_h, s: dict) -> None:
     if s.get("linear") is not None:
         ax.plot(*minmax_line(t_h, s["linear"]), color=LINEAR, lw=2.6, alpha=0.45, zorder=2,
                 label=LABEL_LINEAR)
+    if s.get("real_min") is not None:
+        # Decimated rows: what happened between them, from the full-rate min–max.
+        x, lo, hi = band(t_h, s["real_min"], s["real_max"])
+        ax.fill_between(x, lo, hi, color=REAL, alpha=0.3, lw=0, zorder=2,
+                        label=f"real, full-rate min–max per {s['row_interval']:g} s row")
     ax.plot(*minmax_line(t_h, s["real"]), color=REAL, lw=0.8, zorder=3, label=LABEL_REAL)
     if s.get("smoothed") is not None:
         ax.plot(*minmax_line(t_h, s["smoothed"]), color=SMOOTH, lw=0.5, alpha=0.7, zorder=4,
@@ -140,7 +149,8 @@ def _error_panel(ax, t_s, t_h, gap, name: str, s: dict, ends, paper: float,
     if marks:
         _paper_marks(ax, t_h, sig, ends, paper)
     errors = {"real error": s["real"], "linearized error": s.get("linear"),
-              "smoother error": s.get("smoothed")}
+              "smoother error": s.get("smoothed"), "real min": s.get("real_min"),
+              "real max": s.get("real_max")}
     errors = {k: v for k, v in errors.items() if v is not None}
     half = max(robust_half(errors.values(), [three]), 3.3 * paper if marks else 0.0)
     # When the sunlit σ would be a sliver of an axis sized for the gap growth, the
@@ -172,8 +182,17 @@ def _difference_panel(ax, t_s, t_h, gap, name: str, s: dict, interval_s: float) 
     d = f64(s["difference"]) if s.get("difference") is not None \
         else f64(s["real"]) - f64(s["linear"])
     shade_mask(ax, t_h, gap, None)
+    dmin, dmax = (f64(s[k]) if s.get(k) is not None else None
+                  for k in ("difference_min", "difference_max"))
+    if dmin is not None and s.get("style") != "envelope":
+        x, lo, hi = band(t_h, dmin, dmax)
+        ax.fill_between(x, lo, hi, color=DIFF, alpha=0.3, lw=0, zorder=2,
+                        label=f"{LABEL_DIFF}, full-rate min–max per {s['row_interval']:g} s row")
     if s.get("style") == "envelope":
         x, lo, hi, rms = interval_stats(t_s, d, interval_s)
+        if dmin is not None:
+            lo = interval_stats(t_s, dmin, interval_s)[1]
+            hi = interval_stats(t_s, dmax, interval_s)[2]
         ax.fill_between(x, lo, hi, color=DIFF, alpha=0.35, lw=0, zorder=2,
                         label=f"{LABEL_DIFF}, min–max per {_minutes(interval_s)}")
         ax.plot(*_pm(x, rms), color=DIFF, lw=1.0, zorder=3, label=LABEL_DIFF)
@@ -181,6 +200,11 @@ def _difference_panel(ax, t_s, t_h, gap, name: str, s: dict, interval_s: float) 
         ax.plot(*minmax_line(t_h, d), color=DIFF, lw=0.8, zorder=3, label=LABEL_DIFF)
     ax.axhline(0.0, color="0.4", lw=0.5, zorder=1)
     worst = max_abs(d)
+    if dmin is not None:    # the largest difference may fall between two rows
+        k_full = max(max_abs(dmin), max_abs(dmax))
+        if k_full > worst:
+            worst = k_full
+            d = np.where(np.abs(dmax) >= np.abs(dmin), dmax, dmin)
     ref, ref_label = s.get("reference") or (pct(np.abs(f64(s["sigma"])), 50),
                                             f"filter σ_{name} (median)")
     if worst > 0:
@@ -221,6 +245,8 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0,
     "sigma": filter 1σ, "style": "envelope" (noisy: per-interval band and RMS) or
     "trace", and optionally "linear": estimate − linear-twin truth, "difference":
     real − linear computed at full precision, "smoothed": smoother error,
+    "real_min"/"real_max" and "difference_min"/"difference_max": the full-rate
+    extremes per row of decimated series (with "row_interval", s),
     "reference": (value, label) drawn or quoted in the difference panel (default: the
     median filter σ)}.  ``gap`` is True where there is no Sun-sensor yaw; Sun gaps
     of at least ``min_gap_s`` get the paper's σ_yaw (Eq. 56) marked at their ends.

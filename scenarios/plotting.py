@@ -22,6 +22,7 @@ from estimator.covariance import PAPER_SIGMA_YAW_DEG
 from plots.consistency import plot_consistency
 from plots.errors import plot_errors, plot_estimates
 from plots.run_figures import TORQUE_NAMES, plot_torques
+from plots.season import plot_season
 from plots.telemetry import plot_telemetry_overview
 from plots.truth import plot_truth
 
@@ -35,7 +36,7 @@ COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": e
 UNITS = {"roll": "deg", "yaw": "deg", "h": "N m s"}
 # Every figure name a run directory can hold: a redraw removes those not in its set.
 RUN_FIGURES = ("errors.png", "estimates.png", "consistency.png", "torques.png",
-               "telemetry_overview.png")
+               "telemetry_overview.png", "season.png")
 SIMULATE_FIGURES = ("truth.png", "telemetry.png")
 
 
@@ -106,6 +107,12 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float):
             s["linear"] = c["err_linear"][:, i]
         if "err_real_minus_linear" in c:
             s["difference"] = c["err_real_minus_linear"][:, j]
+        if "err_real_max" in c:   # decimated rows: the full-rate extremes between them
+            s.update(real_min=c["err_real_min"][:, i], real_max=c["err_real_max"][:, i],
+                     row_interval=float(c["output_interval_s"]))
+            if "err_real_minus_linear_max" in c:
+                s.update(difference_min=c["err_real_minus_linear_min"][:, j],
+                         difference_max=c["err_real_minus_linear_max"][:, j])
         if "err_smoothed" in c:
             s["smoothed"] = c["err_smoothed"][:, i]
         if n == "yaw":
@@ -117,6 +124,9 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float):
 
 def _consistency_job(c: dict, gap, title: str, scenario: dict):
     nees = {k: c[f"nees_{k}"] for k in ("real", "linear") if f"nees_{k}" in c} or None
+    for k in ("real", "linear"):
+        if nees is not None and f"nees_{k}_max" in c:
+            nees[f"{k}_max"] = c[f"nees_{k}_max"]
     nis = {m: c["nis_real"][:, i] for i, m in enumerate(("roll", "yaw", "h"))}
     dss = None
     if "tel_sun_head" in c:
@@ -147,8 +157,9 @@ def _telemetry_job(c: dict, gap, title: str):
 
 def plot_run_figures(run_dir: Path) -> list[Path]:
     """The figures of a `run` or `estimate` directory, from scenario.yaml and
-    comparison.npz only; the set is ``figure_set`` of the stored keys, and figures
-    of another set left by an earlier drawing are removed.  (The second argument
+    comparison.npz (and daily.csv for season.png, when it holds two days or more);
+    the set is ``figure_set`` of the stored keys, and figures of another set left by
+    an earlier drawing are removed.  (The second argument
     is accepted and ignored: callers used to pass the telemetry columns.)"""
     run_dir = Path(run_dir)
     scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
@@ -168,6 +179,13 @@ def plot_run_figures(run_dir: Path) -> list[Path]:
     out = run_dir / "plots"
     out.mkdir(exist_ok=True)
     names = figure_set(c)
+    daily = run_dir / "daily.csv"
+    if daily.is_file():
+        # A run's days against the season: worth a figure from two days on.
+        rows = read_csv(daily)
+        if len(rows["day"]) >= 2:
+            names.append("season.png")
+            builders["season.png"] = lambda: (plot_season, (rows, title), {})
     for stale in set(RUN_FIGURES + SIMULATE_FIGURES) - set(names):
         (out / stale).unlink(missing_ok=True)
     return _draw_all([(*builders[name](), out / name) for name in names])
