@@ -56,6 +56,45 @@ def cli_wall_s(*args: str, repeats: int = 3) -> float:
             repeats=repeats)
 
 
+def _tree_rss_mb(proc) -> float:
+    """Resident memory of a process and all its children (MB), 0 once it is gone."""
+    import psutil
+    try:
+        procs = [proc, *proc.children(recursive=True)]
+    except psutil.NoSuchProcess:
+        return 0.0
+    total = 0
+    for p in procs:
+        try:
+            total += p.memory_info().rss
+        except psutil.NoSuchProcess:
+            pass
+    return total / 2**20
+
+
+def run_365day() -> tuple[float, float, float]:
+    """`dynprop run goes_next_equinox` over one year with the default output section:
+    wall time, the peak of the summed resident memory of its processes (sampled every
+    0.2 s), and the size of the run directory."""
+    import psutil
+    exe = str(Path(sys.executable).with_name("dynprop"))
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run"
+        start = time.perf_counter()
+        proc = psutil.Popen([exe, "run", "goes_next_equinox", "--duration-s", str(365 * DAY),
+                             "--out", str(out)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+        peak = 0.0
+        while proc.poll() is None:
+            peak = max(peak, _tree_rss_mb(proc))
+            time.sleep(0.2)
+        wall = time.perf_counter() - start
+        if proc.returncode != 0:
+            raise RuntimeError(f"the one-year run failed (exit {proc.returncode})")
+        size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) / 1e6
+    return wall, peak, size
+
+
 def truth_day(model: TruthModel):
     """One simulated day at 0.512 s output with every torque, the control and the
     ripple on, including input generation and result assembly."""
@@ -97,6 +136,12 @@ def main() -> None:
     if only:
         # `python benchmarks/run.py discretize_ms run_figures_2day_s`: just those.
         for name in only:
+            if name == "run_365day":
+                for key, value, unit in zip(("run_365day_wall_s", "run_365day_peak_rss_MB",
+                                             "run_365day_dir_MB"), run_365day(),
+                                            ("s", "MB", "MB"), strict=True):
+                    report(key, value, unit)
+                continue
             report(name, globals()[name](), "ms" if name.endswith("_ms") else "s")
         return
     report("discretize_ms", discretize_ms(), "ms")
@@ -133,6 +178,12 @@ def main() -> None:
     report("filter_s_per_day", median_time(lambda: kalman_filter(meas, disc, x0, P0),
                                            repeats=5), "s")
     report("run_2day_wall_s", cli_wall_s("run", "goes_next_equinox"), "s")
+    # Issue 14: a year in one run, streamed (skipped with BENCH_QUICK=1).
+    if os.environ.get("BENCH_QUICK") != "1":
+        wall, rss, size = run_365day()
+        report("run_365day_wall_s", wall, "s")
+        report("run_365day_peak_rss_MB", rss, "MB")
+        report("run_365day_dir_MB", size, "MB")
     report("run_figures_2day_s", run_figures_2day_s(), "s")
     k = 5000  # the plain-numpy loop, for comparison, scaled to a day
     part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,
