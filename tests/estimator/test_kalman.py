@@ -344,6 +344,11 @@ def test_smoother_matches_a_dense_rts_reference(rng):
     assert est_dev(sm.x, xs, Ps).max() < 1e-9
     one = rts_smoother(kalman_filter(meas(z[:1, 0]), DISC, np.zeros(N_STATES), P0), DISC)
     assert one.x.shape == (1, N_STATES)
+    # The state-only smoother (a long run's): the same recursion for x^s, with P⁻¹_pred
+    # applied to one vector instead of forming the gain; the same bound.
+    sx = rts_smoother(res, DISC, covariance=False)
+    assert sx.P_packed is None
+    assert est_dev(sx.x, xs, Ps).max() < 1e-9
 
 
 def test_extra_noise_on_chosen_steps_matches_the_dense_references(rng):
