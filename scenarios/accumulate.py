@@ -305,5 +305,5 @@ def window_nees(rec: dict):
     a, b = rec["start"], rec["start"] + len(rec["t_s"])
     idx = nees_rows(a, b)
     k = idx - a
-    real = nees(rec["real"].x[k], unpack(rec["real"].P_packed[k]), rec["truth_model"][k])
+    real = nees(rec["real"].x[k], unpack(rec["real"].P_nees), rec["truth_model"][k])
     return idx, real, rec.get("nees_linear")

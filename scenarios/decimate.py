@@ -22,7 +22,6 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from estimator.kalman import FilterResult
 from estimator.model import H_WHEEL, R, Y
 
 from .comparison import comparison_arrays
@@ -38,9 +37,10 @@ def output_rows(start: int, stop: int, stride: int) -> np.ndarray:
     return np.arange(-(-start // stride) * stride, stop, stride)
 
 
-def _at(result, k) -> FilterResult:
-    return FilterResult(result.x[k], result.P_packed[k], result.innovations[k],
-                        result.innovation_var[k], result.x_next, result.P_next, result.backend)
+def _at(result, k) -> SimpleNamespace:
+    return SimpleNamespace(x=result.x[k], sigma=result.sigma[k],
+                           innovations=result.innovations[k],
+                           innovation_var=result.innovation_var[k])
 
 
 class ComparisonRows:

@@ -157,7 +157,7 @@ def _telemetry_job(c: dict, gap, title: str):
 
 def plot_run_figures(run_dir: Path) -> list[Path]:
     """The figures of a `run` or `estimate` directory, from scenario.yaml and
-    comparison.npz (and daily.csv for season.png, when it holds two days or more);
+    comparison.npz (and daily.csv for season.png, when it holds three days or more);
     the set is ``figure_set`` of the stored keys, and figures of another set left by
     an earlier drawing are removed.  (The second argument
     is accepted and ignored: callers used to pass the telemetry columns.)"""
@@ -181,9 +181,10 @@ def plot_run_figures(run_dir: Path) -> list[Path]:
     names = figure_set(c)
     daily = run_dir / "daily.csv"
     if daily.is_file():
-        # A run's days against the season: worth a figure from two days on.
+        # A run's days against the season: a figure for runs over two days (the
+        # streamed, multi-window ones).
         rows = read_csv(daily)
-        if len(rows["day"]) >= 2:
+        if len(rows["day"]) >= 3:
             names.append("season.png")
             builders["season.png"] = lambda: (plot_season, (rows, title), {})
     for stale in set(RUN_FIGURES + SIMULATE_FIGURES) - set(names):

@@ -106,14 +106,18 @@ def _truth_stream(s: Scenario, run: int) -> TruthStream:
 
 def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
              out: Path | None = None, telemetry_file: bool = False):
-    """Truth, telemetry and the linear twin, window by window (see the module doc).
+    """Truth, telemetry and the linear twin with its filter, window by window (see
+    the module doc).
 
-    Yields the plan first, then one record per window: ``start``, ``stop``, ``t_s``;
-    ``meas`` and ``twin_meas`` (telemetry in SI for the filters: the real one as
-    telemetry.csv writes it); ``truth_model`` and ``twin_model``; ``shadow``; and at
-    the output rows ``tel_rows`` (telemetry.csv's columns) and ``euler_rows``.
-    With ``out`` it writes truth.csv at the output rows and, if ``telemetry_file``,
-    telemetry.csv at every sample there."""
+    Yields the plan first, then tagged records: ``("real", rec)`` as soon as a
+    window's truth and telemetry exist (``index``, ``start``, ``stop``, ``t_s``;
+    ``meas``, the telemetry in SI as telemetry.csv writes it; ``truth_model``;
+    ``shadow``; at the output rows ``tel_rows`` (telemetry.csv's columns) and
+    ``euler_rows``), and ``("twin", rec)`` for a window once the twin and its filter
+    are through it, two windows later (``index``, ``twin_model``, ``linear`` and
+    ``nees_linear``, see ``_lighten_twin``).  With ``out`` it writes truth.csv at
+    the output rows and, if ``telemetry_file``, telemetry.csv at every sample, after
+    handing on each window's records."""
     stream = _truth_stream(s, run)
     plan = make_plan(s, stream.n_samples, window_samples)
     yield plan
@@ -129,11 +133,12 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
         files["truth"] = CsvAppender(Path(out) / "truth.csv")
         if telemetry_file:
             files["telemetry"] = CsvAppender(Path(out) / "telemetry.csv", exact=True)
+    twin_filter = _TwinFilter(s, params, disc, plan)
     pending = None
     twin_x = None
     try:
         for index in range(len(plan.bounds) + 1):
-            current = None
+            current = written = None
             if index < len(plan.bounds):
                 a, b = plan.bounds[index]
                 truth = stream.window(a, b)
@@ -141,30 +146,106 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 tt = truth_torques(truth, mt, params.omega0_radps)
                 rows = output_rows(a, b, plan.stride) - a
                 tel_cols = telemetry_columns(tel, suite)
-                if "truth" in files:
-                    files["truth"].append({k: v[rows] for k, v in
-                                           truth_columns(truth, tel.sun_visible).items()})
-                if "telemetry" in files:
-                    files["telemetry"].append(tel_cols)
-                current = {"index": index, "start": a, "stop": b, "t_s": truth.t_s,
-                           "truth": truth, "tt": tt,
-                           "meas": telemetry_inputs(s, tel_cols),
-                           "tel_rows": {k: v[rows] for k, v in tel_cols.items()},
-                           "truth_model": model_truth(params, truth, tt),
-                           "shadow": truth.shadow,
-                           "euler_rows": truth.euler_rad[rows]}
-                del tel, tel_cols
+                written = ({k: v[rows] for k, v in truth_columns(truth, tel.sun_visible).items()},
+                           tel_cols)
+                real = {"index": index, "start": a, "stop": b, "t_s": truth.t_s,
+                        "meas": telemetry_inputs(s, tel_cols),
+                        "tel_rows": {k: v[rows] for k, v in tel_cols.items()},
+                        "truth_model": model_truth(params, truth, tt),
+                        "shadow": truth.shadow, "euler_rows": truth.euler_rad[rows]}
+                # What the twin needs of the truth, kept until the next window's first h.
+                current = {"index": index, "start": a, "stop": b, "t_s": truth.t_s, "tt": tt,
+                           "truth": SimpleNamespace(
+                               t_s=truth.t_s, h_Nms=truth.h_Nms, shadow=truth.shadow,
+                               wheel_speeds_radps=truth.wheel_speeds_radps,
+                               pitch_rad=truth.pitch_rad, roll_rad=truth.roll_rad,
+                               yaw_rad=truth.yaw_rad, sun_orbit_frame=truth.sun_orbit_frame)}
+                del tel, truth
+                yield "real", real
             if pending is not None:
                 # The twin's last step needs the next window's first h (its wheel torque).
                 h_next = None if current is None else current["truth"].h_Nms[0]
                 twin_x = _twin(s, params, disc, pending, h_next, twin_x, twin_rngs, suite, mt,
                                min_sep)
                 del pending["truth"], pending["tt"]
-                yield pending
+                for done in twin_filter.push(pending):
+                    yield "twin", done
             pending = current
+            if written is not None:
+                if "truth" in files:
+                    files["truth"].append(written[0])
+                if "telemetry" in files:
+                    files["telemetry"].append(written[1])
+                del written
+        for done in twin_filter.finish():
+            yield "twin", done
     finally:
         for f in files.values():
             f.close()
+
+
+class _TwinFilter:
+    """The paper's filter on the twin's telemetry, a window behind the twin: a window
+    is filtered once the next one's telemetry (the derivative's padding) exists."""
+
+    def __init__(self, s, params, disc, plan):
+        self.s, self.params, self.disc, self.plan = s, params, disc, plan
+        self.prior = initial_prior(s, params)
+        self.prev = self.cur = None
+
+    def push(self, rec: dict) -> list[dict]:
+        done = self._filter(self.cur, rec) if self.cur is not None else []
+        self.cur = rec
+        return done
+
+    def finish(self) -> list[dict]:
+        return self._filter(self.cur, None) if self.cur is not None else []
+
+    def _filter(self, cur: dict, nxt: dict | None) -> list[dict]:
+        meas, u, extra = _padded_inputs(self.s, self.params, self.plan, self.prev, cur, nxt,
+                                        "twin_meas")
+        result = kalman_filter(meas, self.disc, *self.prior, u=u, extra=extra)
+        self.prior = (result.x_next, result.P_next)
+        self.prev = {"twin_meas": tuple(None if v is None else v[-self.plan.pad:]
+                                        for v in cur["twin_meas"])}
+        cur["linear"] = result
+        _lighten_twin(cur)
+        return [{k: cur[k] for k in ("index", "twin_model", "linear", "nees_linear")}]
+
+
+class Demux:
+    """The producer's tagged records as two streams: ``reals()`` yields the plan and
+    the real records in order; ``twin(index)`` returns that window's twin record,
+    reading ahead (and keeping the real records it passes) as far as needed."""
+
+    def __init__(self, items):
+        self.items = iter(items)
+        self.plan = next(self.items)
+        self.real_queue: list[dict] = []
+        self.twins: dict[int, dict] = {}
+
+    def _pull(self) -> bool:
+        item = next(self.items, None)
+        if item is None:
+            return False
+        kind, rec = item
+        (self.real_queue.append(rec) if kind == "real" else
+         self.twins.__setitem__(rec["index"], rec))
+        return True
+
+    def reals(self):
+        yield self.plan
+        while True:
+            while not self.real_queue:
+                if not self._pull():
+                    return
+            yield self.real_queue.pop(0)
+
+    def twin(self, index: int) -> dict:
+        while index not in self.twins:
+            if not self._pull():
+                raise RuntimeError(f"the producer ended without the twin of window {index}")
+        return self.twins.pop(index)
 
 
 def _twin(s, params, disc, rec, h_next, x_prev, rngs, suite, mt, min_sep) -> np.ndarray:
@@ -299,20 +380,40 @@ def smoothed(s: Scenario, records, smooth: bool = True):
                     scale = [np.zeros(m) if e is None else e.scale[:m]
                              for e, m in ((extra, len(cur["t_s"])), (extra_n, n))]
                     extra = ExtraNoise(np.concatenate(scale), unit)
-            sm = rts_smoother(result, disc, u=u, extra=extra)
+            sm = rts_smoother(result, disc, u=u, extra=extra, covariance=False)
             m = len(cur["t_s"])
             # `run` reports the smoothed estimate, not its covariance: drop it now.
             cur["smoothed"] = SimpleNamespace(x=sm.x[:m].copy())
             del sm
         else:
             cur["smoothed"] = None
+        _lighten_real(cur)
         yield cur
         cur = nxt
 
 
+def _lighten_real(rec: dict) -> None:
+    """What the summary and files need of the real filter once the window is smoothed:
+    estimate, σ, innovations and the covariance on the NEES samples only (a third of
+    the window's memory)."""
+    from .accumulate import nees_rows
+    a, n = rec["start"], len(rec["t_s"])
+    real = rec["real"]
+    rec["real"] = SimpleNamespace(
+        x=real.x, sigma=real.sigma, innovations=real.innovations,
+        innovation_var=real.innovation_var, backend=real.backend,
+        P_nees=real.P_packed[nees_rows(a, a + n) - a])
+    rec.pop("real_in", None)
+
+
 def windows_of(s: Scenario, run: int = 0, window_samples: int | None = None,
-               records=None, smooth: bool = True):
-    """The chained stages: plan, then one fully processed record per window."""
-    records = records if records is not None else producer(s, run, window_samples)
-    return smoothed(s, filtered(s, filtered(s, records, ("linear",)), ("real",)), smooth)
+               items=None, smooth: bool = True):
+    """The chained stages: the plan, then one fully processed record per window (the
+    real filter and smoother, and the window's twin record merged in)."""
+    demux = Demux(items if items is not None else producer(s, run, window_samples))
+    records = smoothed(s, filtered(s, demux.reals(), ("real",)), smooth)
+    yield next(records)
+    for rec in records:
+        rec.update(demux.twin(rec["index"]))
+        yield rec
 

@@ -23,22 +23,17 @@ from .decimate import ComparisonRows, output_rows
 from .loader import resolved_yaml
 from .outputs import assemble_summary, eq55_sigma_yaw_deg, estimate_columns, write_summary
 from .schema import Scenario, output_writes_telemetry
-from .stream import DAY_S, filtered, producer, smoothed
+from .stream import DAY_S, producer, windows_of
 from .workers import ignore_sigint, sigint_held
 
 QUEUE_WINDOWS = 2
 LOG_EVERY_DAYS = 10
 
 
-def _twin_filtered(s, run, window_samples, out, telemetry_file):
-    """The producer with the twin's filter: one process's share of the work."""
-    return filtered(s, producer(s, run, window_samples, out, telemetry_file), ("linear",))
-
-
 def _child(queue, s, run, window_samples, out, telemetry_file) -> None:
     ignore_sigint()   # the parent handles Ctrl-C and terminates this process
     try:
-        for item in _twin_filtered(s, run, window_samples, out, telemetry_file):
+        for item in producer(s, run, window_samples, out, telemetry_file):
             queue.put(("item", item))
         queue.put(("done", None))
     except BaseException as exc:  # noqa: BLE001 - handed to the parent, which raises it
@@ -49,7 +44,7 @@ def _child(queue, s, run, window_samples, out, telemetry_file) -> None:
 
 
 def producer_process(s: Scenario, run: int, window_samples, out, telemetry_file):
-    """``_twin_filtered`` in a forked process; yields what it yields."""
+    """``stream.producer`` in a forked process; yields what it yields."""
     ctx = get_context("fork")
     queue = ctx.Queue(maxsize=QUEUE_WINDOWS)
     proc = ctx.Process(target=_child, args=(queue, s, run, window_samples, out,
@@ -122,10 +117,9 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     if processes > 1:
         source = producer_process(s, run, window_samples, stage, tel_file)
     else:
-        source = _twin_filtered(s, run, window_samples, stage, tel_file)
-    plan = next(source)
-    records = smoothed(s, filtered(s, _prepend(plan, source), ("real",)))
-    next(records)
+        source = producer(s, run, window_samples, stage, tel_file)
+    records = windows_of(s, items=source)
+    plan = next(records)
     params, _ = build.estimator_model(s)
     dt = s.sample_interval_s
     n = plan.n_samples
@@ -163,9 +157,4 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     plot_run_figures(stage)
     write_summary(stage / "summary.json", summary)
     return summary
-
-
-def _prepend(first, rest):
-    yield first
-    yield from rest
 
