@@ -350,22 +350,35 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
 
 def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
                  chunk: int = 4096, extra: ExtraNoise | None = None,
-                 covariance: bool = True) -> SmootherResult:
+                 covariance: bool = True, x_after: np.ndarray | None = None
+                 ) -> SmootherResult:
     """Rauch–Tung–Striebel smoother over a stored filter history (with the
     filter's own ``u`` and ``extra``).  ``covariance=False`` smooths the state alone
-    (``smoother_x_step``; ``P_packed`` is None), about four times faster."""
+    (``smoother_x_step``; ``P_packed`` is None), about four times faster; with it,
+    ``x_after`` is the smoothed state one step after the history (where a following
+    stretch, smoothed first, begins), from which the recursion goes back over every
+    sample: the smoother of the joined history, without joining it.  Without it the
+    last filtered state is its own smoothed value."""
     n = len(result.x)
-    if n < 2:  # nothing to smooth: the last filter estimate is the smoothed one
+    if x_after is not None and covariance:
+        raise ValueError("x_after needs covariance=False")
+    if n < 2 and x_after is None:  # nothing to smooth: the last estimate is the smoothed one
         return SmootherResult(result.x.copy(),
                               result.P_packed.copy() if covariance else None)
     u = _inputs(u, n)
     scale, Qd_unit = _extra(extra, n)
     engine = _engine("smoother" if covariance else "smoother_x", chunk, backend)
-    # Backwards: step k uses the filter's k-th posterior and input, for k = n−2 … 0.
-    rev = slice(n - 2, None, -1)
-    s0 = np.concatenate([result.x[-1], result.P_packed[-1]]) if covariance else result.x[-1]
+    # Backwards: step k uses the filter's k-th posterior and input, for k = n−2 … 0
+    # (from n−1 when the smoothed state after the history is given).
+    rev = slice(n - 2 if x_after is None else n - 1, None, -1)
+    if covariance:
+        s0 = np.concatenate([result.x[-1], result.P_packed[-1]])
+    else:
+        s0 = result.x[-1] if x_after is None else np.asarray(x_after, dtype=float)
     _, aux = engine.run(s0, [result.x[rev], result.P_packed[rev], u[rev], scale[rev]],
                         pack_params(disc, Qd_unit))
+    if x_after is not None:
+        return SmootherResult(aux[::-1].copy(), None)
     xs = np.vstack([aux[::-1, :N_STATES], result.x[-1:]])
     if not covariance:
         return SmootherResult(xs, None)

@@ -8,9 +8,10 @@ to row i+1, NaN where none is finite), so a gap-end error or a NEES spike betwee
 two rows still shows in the figures; NEES is computed every ``NEES_STRIDE``
 samples and its envelope covers those.
 
-Each key is a ``.npy`` memory map in a scratch folder of the run, so memory does
-not grow with the run; ``finish`` stores them into comparison.npz (a zip of .npy
-files, as ``np.savez`` makes, with fixed timestamps so the bytes repeat).
+Each key is a ``.npy`` file in a scratch folder of the run, mapped only while a
+window is written into it, so memory does not grow with the run; ``finish``
+stores them into comparison.npz (a zip of .npy files, as ``np.savez`` makes, with
+fixed timestamps so the bytes repeat).
 """
 
 from __future__ import annotations
@@ -52,12 +53,27 @@ class ComparisonRows:
         self.maps: dict[str, np.ndarray] = {}
 
     def _map(self, key: str, shape, dtype, fill=np.nan) -> np.ndarray:
+        """The key's file mapped for this window; ``_release`` unmaps it after, so the
+        pages written leave this process's memory (a mapping kept open would hold
+        every page the run ever wrote)."""
+        path = self.folder / f"{key}.npy"
         if key not in self.maps:
-            m = np.lib.format.open_memmap(self.folder / f"{key}.npy", mode="w+", dtype=dtype,
+            m = np.lib.format.open_memmap(path, mode="w+", dtype=dtype,
                                           shape=(self.n_rows, *shape))
             m[...] = fill
-            self.maps[key] = m
-        return self.maps[key]
+            self.maps[key] = True
+        elif not isinstance(self.maps[key], np.memmap):
+            m = np.load(path, mmap_mode="r+")
+        else:
+            return self.maps[key]
+        self.maps[key] = m
+        return m
+
+    def _release(self) -> None:
+        for key, m in self.maps.items():
+            if isinstance(m, np.memmap):
+                m.flush()
+                self.maps[key] = True
 
     def add(self, rec: dict, nees_idx, nees_real, nees_lin) -> None:
         a = rec["start"]
@@ -85,6 +101,7 @@ class ComparisonRows:
                 self._map(key, v.shape[1:], v.dtype)[lo:lo + len(rows)] = v
         if self.stride > 1:
             self._envelopes(rec, a, n, nees_idx, nees_real, nees_lin)
+        self._release()
 
     def _envelopes(self, rec, a, n, nees_idx, nees_real, nees_lin) -> None:
         f = display_factors(rec["params"].omega_n_radps)
@@ -115,12 +132,10 @@ class ComparisonRows:
 
     def finish(self, path: Path, interval_s: float) -> None:
         """Write comparison.npz and remove the scratch folder."""
+        self._release()
         if self.stride > 1:
             np.save(self.folder / "output_interval_s.npy", np.asarray(interval_s, dtype=float))
-            self.maps["output_interval_s"] = None
-        for m in self.maps.values():
-            if m is not None:
-                m.flush()
+            self.maps["output_interval_s"] = True
         tmp = path.with_name(f".{path.name}.tmp")
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
             for key in self.maps:

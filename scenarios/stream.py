@@ -352,10 +352,9 @@ def _lighten_twin(rec: dict) -> None:
     rec.pop("linear_in", None)
 
 
-def _join_results(a: FilterResult, b: FilterResult, n: int) -> FilterResult:
-    cat = [np.concatenate([getattr(a, k), getattr(b, k)[:n]])
-           for k in ("x", "P_packed", "innovations", "innovation_var")]
-    return FilterResult(*cat, b.x_next, b.P_next, a.backend)
+def _head(a: FilterResult, n: int) -> FilterResult:
+    return FilterResult(a.x[:n], a.P_packed[:n], a.innovations[:n], a.innovation_var[:n],
+                        a.x_next, a.P_next, a.backend)
 
 
 def smoothed(s: Scenario, records, smooth: bool = True):
@@ -370,20 +369,20 @@ def smoothed(s: Scenario, records, smooth: bool = True):
         nxt = next(records, None)
         if smooth:
             result, (u, extra) = cur["real"], cur["real_in"]
+            x_after = None
             if nxt is not None:
-                n = min(plan.overlap, len(nxt["t_s"]))
+                # The overlap first, from its filtered end; then this window from the
+                # smoothed state where the overlap begins (no joined copy of the two).
+                m = min(plan.overlap, len(nxt["t_s"]))
                 u_n, extra_n = nxt["real_in"]
-                result = _join_results(result, nxt["real"], n)
-                u = np.concatenate([u, u_n[:n]])
-                if extra is not None or extra_n is not None:
-                    unit = (extra or extra_n).Qd_unit
-                    scale = [np.zeros(m) if e is None else e.scale[:m]
-                             for e, m in ((extra, len(cur["t_s"])), (extra_n, n))]
-                    extra = ExtraNoise(np.concatenate(scale), unit)
-            sm = rts_smoother(result, disc, u=u, extra=extra, covariance=False)
-            m = len(cur["t_s"])
-            # `run` reports the smoothed estimate, not its covariance: drop it now.
-            cur["smoothed"] = SimpleNamespace(x=sm.x[:m].copy())
+                head = _head(nxt["real"], m)
+                x_after = rts_smoother(
+                    head, disc, u=u_n[:m], covariance=False,
+                    extra=None if extra_n is None else ExtraNoise(extra_n.scale[:m],
+                                                                  extra_n.Qd_unit)).x[0]
+            sm = rts_smoother(result, disc, u=u, extra=extra, covariance=False,
+                              x_after=x_after)
+            cur["smoothed"] = SimpleNamespace(x=sm.x)
             del sm
         else:
             cur["smoothed"] = None
