@@ -9,10 +9,18 @@ chunk's worth of padded steps is ever computed.
 
 from __future__ import annotations
 
+import hashlib
+import os
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 
-from .compiled import compile_function, requested_backend
+from .compiled import CFLAGS, cache_dir, compile_function_path, find_compiler, requested_backend
+
+# Bump when build_chunk's construction changes: the step-keyed cache below does not
+# see it.
+CHUNK_BUILD_VERSION = "1"
 
 
 def build_chunk(step: ca.Function, chunk: int) -> ca.Function:
@@ -32,6 +40,34 @@ def build_chunk(step: ca.Function, chunk: int) -> ca.Function:
                        ["X", "AUX"])
 
 
+def _step_key_path(step: ca.Function, chunk: int, cc: str) -> Path:
+    key = hashlib.sha256("\n".join([step.serialize(), str(chunk), CHUNK_BUILD_VERSION, cc,
+                                    *CFLAGS, ca.__version__]).encode()).hexdigest()[:20]
+    return cache_dir() / f"{step.name()}_chunk{chunk}_step_{key}.so"
+
+
+def _chunk_function(step: ca.Function, chunk: int, backend: str) -> tuple[ca.Function, str]:
+    """The compiled ``chunk``-step function of ``step``.  Building the mapaccum
+    function costs 0.1–0.2 s a process, so a library already built for this very
+    step (keyed by its serialisation) is loaded without building it; otherwise it is
+    built, compiled (``compile_function``'s source-keyed cache) and linked under the
+    step's key for the next process."""
+    cc = find_compiler() if backend != "vm" else None
+    fast = _step_key_path(step, chunk, cc) if cc else None
+    if fast is not None and fast.exists():
+        try:
+            return ca.external(f"{step.name()}_chunk{chunk}", str(fast)), "compiled"
+        except RuntimeError:
+            pass   # unreadable: build it again below
+    function, used, so_path = compile_function_path(build_chunk(step, chunk), backend)
+    if fast is not None and so_path is not None:
+        try:
+            os.link(so_path, fast)
+        except OSError:
+            pass   # another process linked it first, or links are not allowed: slow path
+    return function, used
+
+
 class ChunkedRollout:
     """A step function compiled once (main and tail chunk) and rolled out on demand."""
 
@@ -40,12 +76,11 @@ class ChunkedRollout:
         self.step = step
         self.chunk = chunk
         self.tail_chunk = min(tail, chunk)
-        self.function, self.backend = compile_function(build_chunk(step, chunk),
-                                                       backend or requested_backend())
+        self.function, self.backend = _chunk_function(step, chunk,
+                                                      backend or requested_backend())
         # The tail always uses the backend the main chunk ended up with, so a run
         # never mixes compiled and VM arithmetic.
-        self.tail_function, _ = compile_function(build_chunk(step, self.tail_chunk),
-                                                 self.backend)
+        self.tail_function, _ = _chunk_function(step, self.tail_chunk, self.backend)
         self.n_aux = step.size1_out(1)
 
     def run(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray

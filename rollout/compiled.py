@@ -49,16 +49,23 @@ def requested_backend() -> str:
 
 def compile_function(f: ca.Function, backend: str | None = None) -> tuple[ca.Function, str]:
     """Return ``(function, backend_used)`` where backend_used is 'compiled' or 'vm'."""
+    function, used, _ = compile_function_path(f, backend)
+    return function, used
+
+
+def compile_function_path(f: ca.Function, backend: str | None = None
+                          ) -> tuple[ca.Function, str, Path | None]:
+    """``compile_function``, and the library's path (None in the VM)."""
     backend = backend or requested_backend()
     if backend == "vm":
-        return f, "vm"
+        return f, "vm", None
     cc = find_compiler()
     if cc is None:
         if backend == "compiled":
             raise RuntimeError("no C compiler found for DYNPROP_BACKEND=compiled")
         log.warning("no C compiler found; %s runs in the CasADi VM (slower, and its "
                     "results differ from compiled ones in the last bits)", f.name())
-        return f, "vm"
+        return f, "vm", None
     gen = ca.CodeGenerator(f"{f.name()}.c", {"with_header": False})
     gen.add(f)
     source = gen.dump()
@@ -67,12 +74,12 @@ def compile_function(f: ca.Function, backend: str | None = None) -> tuple[ca.Fun
     try:
         if not so_path.exists():
             _build(source, cc, so_path)
-        return ca.external(f.name(), str(so_path)), "compiled"
+        return ca.external(f.name(), str(so_path)), "compiled", so_path
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         if backend == "compiled":
             raise
         log.warning("compiling %s failed (%s); falling back to the CasADi VM", f.name(), exc)
-        return f, "vm"
+        return f, "vm", None
 
 
 def _build(source: str, cc: str, so_path: Path) -> None:

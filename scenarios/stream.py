@@ -116,8 +116,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
     ``euler_rows``), and ``("twin", rec)`` for a window once the twin and its filter
     are through it, two windows later (``index``, ``twin_model``, ``linear`` and
     ``nees_linear``, see ``_lighten_twin``).  With ``out`` it writes truth.csv at
-    the output rows and, if ``telemetry_file``, telemetry.csv at every sample, after
-    handing on each window's records."""
+    the output rows and, if ``telemetry_file``, telemetry.csv at every sample, a
+    window late (after the records that window's twin makes)."""
     stream = _truth_stream(s, run)
     plan = make_plan(s, stream.n_samples, window_samples)
     yield plan
@@ -136,9 +136,18 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
     twin_filter = _TwinFilter(s, params, disc, plan)
     pending = None
     twin_x = None
+    unwritten: list = []     # file rows of windows whose twin is not yet handed on
+
+    def write(upto: int) -> None:
+        while unwritten and unwritten[0][0] <= upto:
+            _, truth_rows, tel_rows = unwritten.pop(0)
+            if "truth" in files:
+                files["truth"].append(truth_rows)
+            if "telemetry" in files:
+                files["telemetry"].append(tel_rows)
     try:
         for index in range(len(plan.bounds) + 1):
-            current = written = None
+            current = None
             if index < len(plan.bounds):
                 a, b = plan.bounds[index]
                 truth = stream.window(a, b)
@@ -146,8 +155,9 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 tt = truth_torques(truth, mt, params.omega0_radps)
                 rows = output_rows(a, b, plan.stride) - a
                 tel_cols = telemetry_columns(tel, suite)
-                written = ({k: v[rows] for k, v in truth_columns(truth, tel.sun_visible).items()},
-                           tel_cols)
+                unwritten.append((index, {k: v[rows] for k, v in
+                                          truth_columns(truth, tel.sun_visible).items()},
+                                  tel_cols))
                 real = {"index": index, "start": a, "stop": b, "t_s": truth.t_s,
                         "meas": telemetry_inputs(s, tel_cols),
                         "tel_rows": {k: v[rows] for k, v in tel_cols.items()},
@@ -170,15 +180,13 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 del pending["truth"], pending["tt"]
                 for done in twin_filter.push(pending):
                     yield "twin", done
+                    # Files once a window's records are all handed on, so the consumer
+                    # gets every record as early as it can.
+                    write(done["index"])
             pending = current
-            if written is not None:
-                if "truth" in files:
-                    files["truth"].append(written[0])
-                if "telemetry" in files:
-                    files["telemetry"].append(written[1])
-                del written
         for done in twin_filter.finish():
             yield "twin", done
+        write(len(plan.bounds))
     finally:
         for f in files.values():
             f.close()
@@ -235,11 +243,16 @@ class Demux:
 
     def reals(self):
         yield self.plan
-        while True:
+        for _ in self.plan.bounds:
             while not self.real_queue:
                 if not self._pull():
                     return
             yield self.real_queue.pop(0)
+
+    def drain(self) -> None:
+        """Read the stream to its end (the producer finishes its files there)."""
+        while self._pull():
+            pass
 
     def twin(self, index: int) -> dict:
         while index not in self.twins:
@@ -320,7 +333,9 @@ def filtered(s: Scenario, records, names=("real", "linear")):
     priors = {name: (x0, P0) for name in names}
     prev, cur = None, next(records, None)
     while cur is not None:
-        nxt = next(records, None)
+        # The last window needs no look-ahead (and waiting for the stream's end would
+        # hold it up until the producer is done with its files).
+        nxt = None if cur["index"] == len(plan.bounds) - 1 else next(records, None)
         for name in names:
             meas, u, extra = _padded_inputs(s, params, plan, prev, cur, nxt, keys[name])
             result = kalman_filter(meas, disc, *priors[name], u=u, extra=extra)
@@ -366,7 +381,7 @@ def smoothed(s: Scenario, records, smooth: bool = True):
     disc = discretize(params, noise, s.sample_interval_s)
     cur = next(records, None)
     while cur is not None:
-        nxt = next(records, None)
+        nxt = None if cur["index"] == len(plan.bounds) - 1 else next(records, None)
         if smooth:
             result, (u, extra) = cur["real"], cur["real_in"]
             x_after = None
@@ -415,4 +430,5 @@ def windows_of(s: Scenario, run: int = 0, window_samples: int | None = None,
     for rec in records:
         rec.update(demux.twin(rec["index"]))
         yield rec
+    demux.drain()
 
