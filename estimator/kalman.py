@@ -334,8 +334,7 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
     inputs = [np.where(present, z, 0.0), present.astype(float), r, _inputs(u, n), scale]
     p = pack_params(disc, Qd_unit)
     if rows is None:
-        states, aux = engine.run(s0, inputs, p)
-        last = states[-1]
+        last, aux = engine.run_final(s0, inputs, p)
     else:
         rows = np.asarray(rows, dtype=np.int64)
         last, aux = engine.run_rows(s0, inputs, p, rows)
@@ -375,8 +374,8 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
         s0 = np.concatenate([result.x[-1], result.P_packed[-1]])
     else:
         s0 = result.x[-1] if x_after is None else np.asarray(x_after, dtype=float)
-    _, aux = engine.run(s0, [result.x[rev], result.P_packed[rev], u[rev], scale[rev]],
-                        pack_params(disc, Qd_unit))
+    _, aux = engine.run_final(s0, [result.x[rev], result.P_packed[rev], u[rev], scale[rev]],
+                              pack_params(disc, Qd_unit))
     if x_after is not None:
         return SmootherResult(aux[::-1].copy(), None)
     xs = np.vstack([aux[::-1, :N_STATES], result.x[-1:]])

@@ -98,6 +98,22 @@ class ChunkedRollout:
                 aux[start:stop] = a_out[:stop - start]
         return states, aux
 
+    def run_final(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Like ``run``, but the carried states go through one reused scratch block:
+        returns only the final carried state, and the aux outputs (N, n_aux), bit for
+        bit ``run``'s (a long filter's state history is as large as its outputs and
+        only its end is used)."""
+        arrays = _as_rows(inputs)
+        n_steps = len(arrays[0]) if arrays else 0
+        aux = np.empty((n_steps, self.n_aux))
+        x = np.array(x0, dtype=float).reshape(-1)
+        for start, stop, x_out, a_out in self._chunks(x0, arrays, p, None, aux):
+            if a_out.base is not aux:  # a short chunk ran in scratch
+                aux[start:stop] = a_out[:stop - start]
+            x = x_out[stop - start - 1].copy()
+        return x, aux
+
     def run_rows(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
                  rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Like ``run``, but keep only the aux outputs of the steps ``rows`` (sorted)
@@ -150,10 +166,10 @@ class ChunkedRollout:
                     else:
                         blk = a[start:stop]
                     buf.set_arg(i, memoryview(blk.reshape(-1)))
-                if states is not None and n == c:
-                    x_out, a_out = states[start + 1:stop + 1], aux[start:stop]
-                else:
-                    x_out, a_out = scratch_x, scratch_a
+                full = n == c
+                x_out = states[start + 1:stop + 1] if full and states is not None \
+                    else scratch_x
+                a_out = aux[start:stop] if full and aux is not None else scratch_a
                 x_flat, a_flat = x_out.reshape(-1), a_out.reshape(-1)
                 assert np.shares_memory(x_flat, x_out) and np.shares_memory(a_flat, a_out)
                 buf.set_res(0, memoryview(x_flat))

@@ -108,9 +108,9 @@ def propagate_lti_final(Phi, Gamma, x0, u) -> tuple[np.ndarray, np.ndarray]:
     last (where a following window starts)."""
     Phi, Gamma = np.asarray(Phi, float), np.asarray(Gamma, float)
     p = np.concatenate([Phi.ravel(order="F"), Gamma.ravel(order="F")])
-    states, aux = _linear_engine(*Gamma.shape).run(np.asarray(x0, float),
-                                                   [np.asarray(u, float)], p)
-    return aux, states[-1]
+    last, aux = _linear_engine(*Gamma.shape).run_final(np.asarray(x0, float),
+                                                       [np.asarray(u, float)], p)
+    return aux, last
 
 
 def propagate_linear(disc, x0, u) -> np.ndarray:
