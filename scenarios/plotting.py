@@ -43,7 +43,8 @@ SIMULATE_FIGURES = ("truth.png", "telemetry.png")
 def save_figure(fig, path: Path) -> Path:
     # Write beside the target and rename, so a figure is never half written.
     tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=120, format="png")
+    # zlib level 1: a quarter of the encoding time for files ~10% larger.
+    fig.savefig(tmp, dpi=120, format="png", pil_kwargs={"compress_level": 1})
     os.replace(tmp, path)
     import matplotlib.pyplot as plt
     plt.close(fig)

@@ -120,6 +120,9 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         source = producer(s, run, window_samples, stage, tel_file)
     records = windows_of(s, items=source)
     plan = next(records)
+    # The figures' modules (matplotlib: ~0.4 s) load while the producer simulates the
+    # first window, rather than after the last.
+    from .plotting import plot_run_figures
     params, _ = build.estimator_model(s)
     dt = s.sample_interval_s
     n = plan.n_samples
@@ -153,7 +156,6 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     summary = assemble_summary(s, params, figures.backend, True, True, figures.figures(n))
     summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
                    daily="daily.csv")
-    from .plotting import plot_run_figures
     plot_run_figures(stage)
     write_summary(stage / "summary.json", summary)
     return summary
