@@ -1,10 +1,10 @@
 """`dynprop run` as a stream: the run directory written window by window.
 
-The producer (truth, telemetry and the linear twin; it also writes truth.csv and
-telemetry.csv) runs in a second process, joined to this one by a queue of at most
-``QUEUE_WINDOWS`` windows, while this one filters, smooths, accumulates the
-summary (``accumulate``) and writes estimate.csv and comparison.npz
-(``decimate``) at the output cadence.  Memory holds a few windows, whatever the
+The producer (truth, telemetry, the linear twin and its filter; it also writes
+truth.csv and telemetry.csv) runs in a second process, joined to this one by a
+queue of at most ``QUEUE_ITEMS`` records, while this one runs the real filter and
+the smoother, accumulates the summary (``accumulate``) and writes estimate.csv
+and comparison.npz (``decimate``) at the output cadence.  Memory holds a few windows, whatever the
 duration.  Progress: a bar of simulated days on a terminal, otherwise a line every
 ``LOG_EVERY_DAYS`` days, for runs longer than one window.
 """
@@ -26,7 +26,7 @@ from .schema import Scenario, output_writes_telemetry
 from .stream import DAY_S, producer, windows_of
 from .workers import ignore_sigint, sigint_held
 
-QUEUE_WINDOWS = 2
+QUEUE_ITEMS = 4   # two windows: a real and a twin record each
 LOG_EVERY_DAYS = 10
 
 
@@ -46,7 +46,7 @@ def _child(queue, s, run, window_samples, out, telemetry_file) -> None:
 def producer_process(s: Scenario, run: int, window_samples, out, telemetry_file):
     """``stream.producer`` in a forked process; yields what it yields."""
     ctx = get_context("fork")
-    queue = ctx.Queue(maxsize=QUEUE_WINDOWS)
+    queue = ctx.Queue(maxsize=QUEUE_ITEMS)
     proc = ctx.Process(target=_child, args=(queue, s, run, window_samples, out,
                                             telemetry_file), daemon=True)
     with sigint_held():
