@@ -301,7 +301,7 @@ class DailyFigures:
 
 def window_nees(rec: dict):
     """Global NEES indices of the window, the real filter's NEES there, and the
-    twin's (computed where the twin was filtered, ``stream._lighten_twin``)."""
+    twin's (computed where the twin was filtered, ``twin_stream.lighten_twin``)."""
     a, b = rec["start"], rec["start"] + len(rec["t_s"])
     idx = nees_rows(a, b)
     k = idx - a
