@@ -19,6 +19,7 @@ from estimator.consistency import chi2_bounds, nees, nis
 from estimator.kalman import unpack
 from estimator.model import H_WHEEL, N_STATES, R, Y
 
+from .decimate import output_rows
 from .outputs import NEES_STRIDE, RAD2DEG
 
 DAY_S = 86400.0
@@ -96,11 +97,6 @@ class GapTracker:
         if self.open_since is not None and self._long(self.open_since, n):
             self.gaps.append((self.open_since, n))
         self.open_since = None
-
-
-def nees_rows(start: int, stop: int) -> np.ndarray:
-    """Global indices in [start, stop) where NEES is computed (every NEES_STRIDE)."""
-    return np.arange(-(-start // NEES_STRIDE) * NEES_STRIDE, stop, NEES_STRIDE)
 
 
 class RunFigures:
@@ -303,7 +299,7 @@ def window_nees(rec: dict):
     """Global NEES indices of the window, the real filter's NEES there, and the
     twin's (computed where the twin was filtered, ``twin_stream.lighten_twin``)."""
     a, b = rec["start"], rec["start"] + len(rec["t_s"])
-    idx = nees_rows(a, b)
+    idx = output_rows(a, b, NEES_STRIDE)
     k = idx - a
     real = nees(rec["real"].x[k], unpack(rec["real"].P_nees), rec["truth_model"][k])
     return idx, real, rec.get("nees_linear")

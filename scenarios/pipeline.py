@@ -253,6 +253,33 @@ def model_truth(params: em.ModelParams, truth, tt: TruthTorques, rows=slice(None
                             tt.torque_states[rows]])
 
 
+def twin_input(params, model_torques, tt: TruthTorques, h_Nms, dt_s: float,
+               h_next: float | None = None) -> np.ndarray:
+    """The twin's inputs (Eq. 12a): the modelled torques plus the fit's residual, and
+    the true N_w, the mean of ḣ over each step (exact for h).  The last step needs
+    the next sample's h (``h_next``, a following window's first); without it its N_w
+    is 0 (no sample follows it)."""
+    mt = model_torques
+    h = h_Nms if h_next is None else np.append(h_Nms, h_next)
+    nw = np.diff(h) / dt_s
+    if h_next is None:
+        nw = np.append(nw, 0.0)
+    return em.input_vector(params, mt.roll_Nm + tt.res_x, mt.yaw_Nm + tt.res_z, nw)
+
+
+def sense_twin(s: Scenario, truth, twin: np.ndarray, suite, rngs):
+    """Telemetry of the twin's states ``twin`` (model coordinates), sensed by ``suite``
+    with the generators ``rngs`` (the same seeds as the truth's: the same draws)."""
+    k = build.yaw_factors(s)
+    speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms, k / (k @ k))
+    c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)
+    twin_truth = SimpleNamespace(
+        t_s=truth.t_s, roll_rad=twin[:, em.R], pitch_rad=truth.pitch_rad,
+        wheel_speeds_radps=speeds, shadow=truth.shadow, sun_orbit_frame=truth.sun_orbit_frame,
+        sun_body=np.einsum("nij,nj->ni", c_br, truth.sun_orbit_frame))
+    return make_telemetry(twin_truth, suite, rngs, s.sensors.sun.min_sun_separation_deg)
+
+
 def linear_twin(s: Scenario, truth, run: int, model_torques, tt: TruthTorques):
     """The paper's model of the spacecraft of ``s`` (Eq. 11) propagated exactly from the
     truth's initial deviation under the same torques (fit in the states, residual and
@@ -261,20 +288,10 @@ def linear_twin(s: Scenario, truth, run: int, model_torques, tt: TruthTorques):
     model, its telemetry and the model."""
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
-    mt = model_torques
-    nw_true = np.append(np.diff(truth.h_Nms) / s.sample_interval_s, 0.0)
-    u_twin = em.input_vector(params, mt.roll_Nm + tt.res_x, mt.yaw_Nm + tt.res_z, nw_true)
+    u_twin = twin_input(params, model_torques, tt, truth.h_Nms, s.sample_interval_s)
     twin = propagate_linear(disc, model_truth(params, truth, tt, [0])[0], u_twin)
-    k = build.yaw_factors(s)
-    speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms, k / (k @ k))
-    c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)
-    twin_truth = SimpleNamespace(
-        t_s=truth.t_s, roll_rad=twin[:, em.R], pitch_rad=truth.pitch_rad,
-        wheel_speeds_radps=speeds, shadow=truth.shadow, sun_orbit_frame=truth.sun_orbit_frame,
-        sun_body=np.einsum("nij,nj->ni", c_br, truth.sun_orbit_frame))
     # Fresh generators from the same seed: the twin's noise draws equal the real ones.
-    twin_tel = make_telemetry(twin_truth, build.build_sensors(s), build.streams(s.seed, run),
-                              s.sensors.sun.min_sun_separation_deg)
+    twin_tel = sense_twin(s, truth, twin, build.build_sensors(s), build.streams(s.seed, run))
     return twin, twin_tel, params
 
 

@@ -42,6 +42,7 @@ from . import build
 from .columns import telemetry_columns, truth_columns
 from .csvio import CsvAppender
 from .decimate import output_rows
+from .outputs import NEES_STRIDE
 from .pipeline import (
     initial_prior,
     model_truth,
@@ -168,8 +169,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
             if pending is not None:
                 # The twin's last step needs the next window's first h (its wheel torque).
                 h_next = None if current is None else current["truth"].h_Nms[0]
-                twin_x = twin_window(s, params, disc, pending, h_next, twin_x, twin_rngs, suite, mt,
-                               min_sep)
+                twin_x = twin_window(s, params, disc, pending, h_next, twin_x, twin_rngs, suite,
+                                     mt)
                 del pending["truth"], pending["tt"]
                 for done in twin_filter.push(pending):
                     yield "twin", done
@@ -299,13 +300,12 @@ def _lighten_real(rec: dict) -> None:
     """What the summary and files need of the real filter once the window is smoothed:
     estimate, σ, innovations and the covariance on the NEES samples only (a third of
     the window's memory)."""
-    from .accumulate import nees_rows
     a, n = rec["start"], len(rec["t_s"])
     real = rec["real"]
     rec["real"] = SimpleNamespace(
         x=real.x, sigma=real.sigma, innovations=real.innovations,
         innovation_var=real.innovation_var, backend=real.backend,
-        P_nees=real.P_packed[nees_rows(a, a + n) - a])
+        P_nees=real.P_packed[output_rows(a, a + n, NEES_STRIDE) - a])
     rec.pop("real_in", None)
 
 

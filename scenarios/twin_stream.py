@@ -18,37 +18,31 @@ import numpy as np
 from estimator import model as em
 from estimator.consistency import nees
 from estimator.kalman import ExtraNoise, kalman_filter, unpack
-from sim.frames import dcm_from_euler312
-from sim.telemetry import make_telemetry
 
-from . import build
-from .pipeline import filter_inputs, initial_prior, model_truth, propagate_lti_final
+from .decimate import output_rows
+from .outputs import NEES_STRIDE
+from .pipeline import (
+    filter_inputs,
+    initial_prior,
+    model_truth,
+    propagate_lti_final,
+    sense_twin,
+    twin_input,
+)
 
 
-def twin_window(s, params, disc, rec, h_next, x_prev, rngs, suite, mt, min_sep) -> np.ndarray:
+def twin_window(s, params, disc, rec, h_next, x_prev, rngs, suite, mt) -> np.ndarray:
     """The twin over one window (``pipeline.linear_twin`` with carried state and
     generators); fills ``twin_model`` and ``twin_meas`` and returns the next state."""
-    truth, tt, dt = rec["truth"], rec["tt"], s.sample_interval_s
-    h = truth.h_Nms if h_next is None else np.append(truth.h_Nms, h_next)
-    nw = np.diff(h) / dt
-    if h_next is None:
-        nw = np.append(nw, 0.0)
-    u = em.input_vector(params, mt.roll_Nm + tt.res_x, mt.yaw_Nm + tt.res_z, nw)
+    truth, tt = rec["truth"], rec["tt"]
+    u = twin_input(params, mt, tt, truth.h_Nms, s.sample_interval_s, h_next)
     if x_prev is None:
         x0 = model_truth(params, truth, tt, [0])[0]
     else:
         x0 = x_prev.copy()
         x0[em.NPX:] = tt.torque_states[0]     # the new window's fit (module doc)
     twin, x_next = propagate_lti_final(disc.Phi, disc.Gamma, x0, u)
-    k = build.yaw_factors(s)
-    speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms,
-                                                 k / (k @ k))
-    c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)
-    twin_truth = SimpleNamespace(
-        t_s=truth.t_s, roll_rad=twin[:, em.R], pitch_rad=truth.pitch_rad,
-        wheel_speeds_radps=speeds, shadow=truth.shadow, sun_orbit_frame=truth.sun_orbit_frame,
-        sun_body=np.einsum("nij,nj->ni", c_br, truth.sun_orbit_frame))
-    tel = make_telemetry(twin_truth, suite, rngs, min_sep)
+    tel = sense_twin(s, truth, twin, suite, rngs)
     head = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
     rec["twin_model"] = twin
     rec["twin_meas"] = (tel.roll_rad, tel.yaw_rad, tel.wheel_speeds_radps, tel.yaw_sigma_rad,
@@ -89,9 +83,8 @@ def lighten_twin(rec: dict) -> None:
     """What the summary and figures need of the twin's filter, once the next window
     no longer needs its telemetry: its NEES (computed here), estimates and
     innovations, not its covariance history."""
-    from .accumulate import nees_rows
     a, n = rec["start"], len(rec["t_s"])
-    idx = nees_rows(a, a + n)
+    idx = output_rows(a, a + n, NEES_STRIDE)
     lin = rec["linear"]
     k = idx - a
     rec["nees_linear"] = nees(lin.x[k], unpack(lin.P_packed[k]), rec["twin_model"][k])

@@ -192,3 +192,26 @@ def test_a_long_run_logs_days_and_ctrl_c_mid_stream_leaves_nothing(tmp_path):
     assert not out.parent.exists() or not any(out.parent.iterdir())
     gone, alive = psutil.wait_procs(children, timeout=10)
     assert not alive
+
+
+def test_gaps_found_window_by_window_are_sun_gaps_of_the_whole_mask():
+    """GapTracker against outputs.sun_gaps on the whole mask (the independent
+    reference): random outages, cut into random windows, with gaps open across cuts
+    and at the run's end."""
+    from scenarios.accumulate import GapTracker
+    from scenarios.outputs import sun_gaps
+
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        n = int(rng.integers(1, 200))
+        present = np.repeat(rng.random(50) < 0.5, rng.integers(1, 30, 50))[:n]
+        present = np.r_[present, np.ones(n - len(present), bool)]
+        min_s = float(rng.integers(1, 20))
+        tracker = GapTracker(1.0, min_s)
+        cuts = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, int(rng.integers(0, 6))),
+                                  replace=False)) if n > 1 else []
+        bounds = [0, *cuts, n]
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            tracker.add(int(a), present[a:b])
+        tracker.finish(n)
+        assert tracker.gaps == [(int(a), int(b)) for a, b in sun_gaps(present, 1.0, min_s / 3600)]
