@@ -112,6 +112,17 @@ def _build_parser() -> argparse.ArgumentParser:
     _scenario_args(lin)
     lin.add_argument("--out", required=True, type=Path, help="new report directory")
     lin.add_argument("--force", action="store_true", help="replace a non-empty --out")
+    trim = sub.add_parser("trim", help="solar trim-tab setting from the estimated torque: "
+                          "κ ± σ and the tab move (RUN_DIR/trim/); --verify flies it")
+    trim.add_argument("run_dir", type=Path, metavar="RUN_DIR",
+                      help="a `dynprop run` or `dynprop estimate` directory")
+    trim.add_argument("--from-s", type=float, metavar="T", help="batch start (s, default: the "
+                      "telemetry's first sample)")
+    trim.add_argument("--to-s", type=float, metavar="T", help="batch end (s, default: the last)")
+    trim.add_argument("--telemetry", type=Path, metavar="FILE",
+                      help="telemetry CSV (default: RUN_DIR/telemetry.csv)")
+    trim.add_argument("--verify", action="store_true", help="fly the recommended tab over the "
+                      "same span (RUN_DIR/trim/verify/) and compare before and after")
     plot = sub.add_parser("plot", help="(re)draw the figures of a run or Monte Carlo directory")
     plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser
@@ -244,6 +255,16 @@ def _cmd_plot(args) -> int:
     return 0
 
 
+def _cmd_trim(args) -> int:
+    from .trim_report import one_line, run_trim
+    start = time.perf_counter()
+    d = run_trim(args.run_dir, args.from_s, args.to_s, args.telemetry, args.verify)
+    print(one_line(d))
+    print(f"{time.perf_counter() - start:.1f} s; wrote {args.run_dir}/trim/: trim.json, "
+          "trim.md, trim.png" + (", verify/" if args.verify else ""))
+    return 0
+
+
 def _cmd_observability(args) -> int:
     from estimator.observability import format_rank_table
 
@@ -328,7 +349,8 @@ def _cmd_montecarlo(args) -> int:
 COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd_plot,
             "run": _cmd_run, "estimate": _cmd_estimate,
             "observability": _cmd_observability, "covariance": _cmd_covariance,
-            "linearization": _cmd_linearization, "montecarlo": _cmd_montecarlo}
+            "linearization": _cmd_linearization, "montecarlo": _cmd_montecarlo,
+            "trim": _cmd_trim}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -336,9 +358,10 @@ def main(argv: list[str] | None = None) -> int:
     from .loader import ScenarioError
     from .montecarlo import SchedulerError
     from .rundir import RunDirError
+    from .trim import TrimError
     try:
         return COMMANDS[args.command](args)
-    except (InputError, RunDirError, ScenarioError, SchedulerError) as exc:
+    except (InputError, RunDirError, ScenarioError, SchedulerError, TrimError) as exc:
         # One line per problem, each naming its key path, column or argument.
         for line in str(exc).splitlines() or [""]:
             print(f"dynprop: error: {line}", file=sys.stderr)

@@ -173,15 +173,20 @@ def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
     return out
 
 
-def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None):
+def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
+                  known_Nm=None):
     """Telemetry arrays to the filter's measurements, inputs u and any dropout noise
-    (``ExtraNoise`` or None)."""
+    (``ExtraNoise`` or None).  ``known_Nm`` (N, 2), roll and yaw torques known per
+    sample, joins the modelled N_x*, N_z* (Eq. 9)."""
     e = s.estimator
     if yaw_sigma is not None and sun_head is not None:
         yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
+    nx, nz = e.model_torques.roll_Nm, e.model_torques.yaw_Nm
+    if known_Nm is not None:
+        nx, nz = nx + known_Nm[:, 0], nz + known_Nm[:, 1]
     inputs = prepare(params, s.sample_interval_s, roll, yaw, speeds, build.yaw_factors(s),
-                     build.estimator_sensor_specs(s), yaw_sigma, e.model_torques.roll_Nm,
-                     e.model_torques.yaw_Nm, e.wheel_torque_window_s)
+                     build.estimator_sensor_specs(s), yaw_sigma, nx, nz,
+                     e.wheel_torque_window_s)
     extra = None
     if inputs.wheel_noise is not None:
         unit = discretize(params, em.ProcessNoise(q_x=0.0, q_z=0.0, q_w=1.0),

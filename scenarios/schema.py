@@ -320,6 +320,29 @@ class Estimator(_Section):
         "covariance grows); a longer one is rejected with the row where it starts.")
 
 
+QUARTER_ORBIT_S = 21541.0   # the correlation time of Eq. 45
+
+
+class Trim(_Section):
+    """How `dynprop trim` estimates the solar imbalance κ (docs/trim.md).  Its batch
+    filter is the paper's, with the known magnetic torques as modelled torques and
+    a process noise for what is left once the tab is near trim: Eq. 45's recipe
+    (mean-square torque error × a quarter-orbit correlation time) with this
+    torque error, and no random walk of the torque states (κ does not change)."""
+
+    torque_error_Nm: float = Field(
+        2e-7, gt=0, description="unmodelled roll and yaw torque left after the known "
+        "ones (gravity gradient as the attitude moves, residual-dipole changes); Eq. 45 "
+        "takes 5e-6 for an untrimmed spacecraft, an upper limit meant for yaw (N m)")
+    correlation_time_s: float = Field(QUARTER_ORBIT_S, gt=0, description="its correlation "
+                                      "time; Eq. 45's quarter orbit (s)")
+
+    @property
+    def q_Nm2s(self) -> float:
+        """White roll and yaw torque density q = δN² τ ((N m)² s), as Eq. 45."""
+        return self.torque_error_Nm ** 2 * self.correlation_time_s
+
+
 DEFAULT_OUTPUT_INTERVAL_S = 64.0   # 125 samples of 0.512 s
 TELEMETRY_AUTO_MAX_S = 2 * 86400.0
 
@@ -386,6 +409,7 @@ class Scenario(_Section):
     estimator: Estimator = Field(default_factory=Estimator)
     montecarlo: MonteCarlo = Field(default_factory=MonteCarlo)
     output: Output = Field(default_factory=Output)
+    trim: Trim = Field(default_factory=Trim)
 
     @field_validator("dynprop_version", mode="before")
     @classmethod

@@ -302,6 +302,27 @@ class TruthStream:
                             np.arange(len(coarse)), radius, step_len)
         return _shadow_fine(coarse, near, a, alpha, sun, radius, model, every)
 
+    def _inputs(self, a: int, b: int, t_s: np.ndarray, ripple: np.ndarray):
+        sun = _sun_on_grid(t_s, self.sun_nodes)
+        alpha = self.orbit.right_ascension(t_s, self.gmst0)
+        shadow = self._shadow(a, b, alpha, sun)
+        cut = slice(a, b)
+        return step_inputs(
+            t_s, self.epoch, self.orbit, self.environment, ripple,
+            None if self.extra_torque is None else self.extra_torque[cut],
+            None if self.wheel_torque is None else self.wheel_torque[cut], sun=sun,
+            shadow=shadow)
+
+    def sun(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Samples a … b−1 (any range, no rollout, nothing carried): their times, the
+        satellite-to-Sun unit vector in the orbit frame (N, 3) and the solar torque's
+        scale, shadow × (1 AU / r)², exactly as ``window`` gives them to the step."""
+        if not 0 <= a < b <= self.n_samples:
+            raise ValueError(f"samples [{a}, {b}) are outside the run's {self.n_samples}")
+        t_s = self._t(np.arange(a, b))
+        inputs, _ = self._inputs(a, b, t_s, np.zeros((b - a, self.spacecraft.n_wheels)))
+        return t_s, inputs["sun_r"], inputs["sun_scale"]
+
     def window(self, a: int, b: int) -> TruthResult:
         """The truth at samples a … b−1 (the next window starts at b)."""
         if a != self.next_start or not a < b <= self.n_samples:
@@ -313,15 +334,7 @@ class TruthStream:
             ripple = self.sigma * self.rng.standard_normal((b - a, n_wheels))
         else:
             ripple = np.zeros((b - a, n_wheels))
-        sun = _sun_on_grid(t_s, self.sun_nodes)
-        alpha = self.orbit.right_ascension(t_s, self.gmst0)
-        shadow = self._shadow(a, b, alpha, sun)
-        cut = slice(a, b)
-        inputs, shadow = step_inputs(
-            t_s, self.epoch, self.orbit, self.environment, ripple,
-            None if self.extra_torque is None else self.extra_torque[cut],
-            None if self.wheel_torque is None else self.wheel_torque[cut], sun=sun,
-            shadow=shadow)
+        inputs, shadow = self._inputs(a, b, t_s, ripple)
         # One step per output sample: the last step's end state is the next window's
         # first, kept as final_state.
         states, aux = self.model.rollout(self.x, inputs, self.p)

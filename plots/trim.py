@@ -1,0 +1,43 @@
+"""The trim figure: the estimated solar torque against the true one, roll and yaw.
+
+Draws only what it is given (plain arrays); no physics here.
+"""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .decor import shade_mask  # noqa: E402
+
+
+def plot_trim(shape_t_s: np.ndarray, shape_xz: np.ndarray, kappa_Nm: float, sigma_Nm: float,
+              rows_t_s: np.ndarray, filter_xz: np.ndarray, title: str,
+              truth_t_s: np.ndarray | None = None, truth_xz: np.ndarray | None = None):
+    """Two panels (roll, yaw torque against time in hours): the fitted solar torque
+    κ̂ · shape with its ±1σ band, the filter's running torque estimate less the
+    fitted constants, and the true solar torque when given.  Eclipses are shaded."""
+    t_h = np.asarray(shape_t_s) / 3600.0
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True, constrained_layout=True)
+    eclipse = ~np.any(shape_xz != 0, axis=1)
+    for i, (ax, name) in enumerate(zip(axes, ("roll", "yaw"), strict=True)):
+        fit = kappa_Nm * shape_xz[:, i]
+        band = sigma_Nm * np.abs(shape_xz[:, i])
+        shade_mask(ax, t_h, eclipse, "eclipse" if i == 0 else None)
+        ax.plot(np.asarray(rows_t_s) / 3600.0, filter_xz[:, i], lw=0.8, color="0.45",
+                label="filter's running estimate, less the fitted constant")
+        if truth_t_s is not None:
+            ax.plot(np.asarray(truth_t_s) / 3600.0, truth_xz[:, i], lw=1.6, color="C1",
+                    ls="--", label="true solar torque")
+        ax.fill_between(t_h, fit - band, fit + band, color="C0", alpha=0.25, lw=0,
+                        label="±1σ")
+        ax.plot(t_h, fit, lw=1.0, color="C0", label="κ̂ × unit solar torque")
+        ax.set_ylabel(f"{name} torque (N m)")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (h)")
+    axes[0].legend(loc="upper right", fontsize=8, ncol=2)
+    fig.suptitle(title, fontsize=10)
+    return fig

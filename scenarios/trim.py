@@ -1,0 +1,200 @@
+"""`dynprop trim`: the solar trim-tab setting from the estimated torque, the
+paper's second requirement (abstract, Section 2.2); ``--verify`` flies it.
+
+The batch [from, to] of a run's telemetry goes through the paper's filter once
+more, tuned for a spacecraft near trim (``schema.Trim``) and with the known
+magnetic torques as modelled torques (Eq. 9).  Its torque states at the batch
+end give κ̂ ± σ by generalised least squares against the solar torque of a unit
+κ over the same batch (``estimator.trim``).  What that assumes known is
+``ASSUMED_KNOWN``, written into every report.  docs/trim.md has the method and
+its validation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimator import model as em
+from estimator.kalman import FilterResult, kalman_filter, unpack
+from estimator.preprocess import yaw_momentum
+from estimator.transition import discretize
+from estimator.trim import KappaFit, Recommendation, equivalent_states, fit_kappa, recommend
+from sim import geomag
+from sim.truth import TruthStream
+
+from . import build
+from .pipeline import filter_inputs, initial_prior, telemetry_inputs
+from .schema import QUARTER_ORBIT_S, Scenario
+
+ASSUMED_KNOWN = (
+    "the Sun's direction and distance (the ephemeris), the Earth's shadow and the "
+    "array-to-sail lever axis: the solar torque's direction, its phase over the orbit "
+    "and its switch-off in eclipse",
+    "the geomagnetic field model at the station longitude, the torquers' unloading law "
+    "(gain, saturation) and any commanded dipole profile: the torquer torque is "
+    "rebuilt from the telemetered wheel momentum h, Earth pointing assumed (a degree "
+    "of attitude error changes it by under 2%), and enters the filter as a modelled "
+    "torque",
+    "the tab law κ = untrimmed − effectiveness · tab: only the effectiveness is needed",
+)
+ESTIMATED = ("κ", "a constant roll and a constant yaw torque (residual dipole, gravity-"
+             "gradient imperfections: constant in the body of an Earth-pointing GEO "
+             "satellite)")
+SHAPE_EVERY = 8   # the unit-κ solar torque is smooth: every 8th sample (4 s) is plenty
+
+
+class TrimError(ValueError):
+    """A batch that cannot give κ: reported one line per problem, exit status 2."""
+
+
+@dataclass(frozen=True)
+class Batch:
+    """Samples k0 … k1−1 of the run's grid (times k·dt from the scenario's epoch)."""
+
+    k0: int
+    k1: int
+    dt_s: float
+
+    @property
+    def from_s(self) -> float:
+        return round(self.k0 * self.dt_s, 9)
+
+    @property
+    def to_s(self) -> float:
+        return round((self.k1 - 1) * self.dt_s, 9)
+
+
+def choose_batch(t_s: np.ndarray, dt_s: float, from_s: float | None, to_s: float | None
+                 ) -> Batch:
+    """The batch on the telemetry's grid (default: all of it); TrimError if it is
+    outside the telemetry or shorter than a quarter orbit."""
+    k_all = np.rint(np.asarray(t_s) / dt_s).astype(np.int64)
+    lo, hi = int(k_all[0]), int(k_all[-1])
+    problems = []
+    k0 = lo if from_s is None else int(np.ceil(from_s / dt_s - 1e-9))
+    k1 = hi if to_s is None else int(np.floor(to_s / dt_s + 1e-9))
+    if not lo <= k0 <= hi:
+        problems.append(f"--from-s: {from_s:g} s is outside the telemetry "
+                        f"({lo * dt_s:g} … {hi * dt_s:g} s)")
+    if not lo <= k1 <= hi:
+        problems.append(f"--to-s: {to_s:g} s is outside the telemetry "
+                        f"({lo * dt_s:g} … {hi * dt_s:g} s)")
+    if not problems and (k1 - k0) * dt_s < QUARTER_ORBIT_S - dt_s:   # to the sample
+        problems.append(f"--from-s/--to-s: the batch is {(k1 - k0) * dt_s / 3600:.2f} h, shorter "
+                        f"than a quarter orbit ({QUARTER_ORBIT_S / 3600:.2f} h): too short "
+                        "to tell the orbit-rate solar torque from a constant one")
+    if problems:
+        raise TrimError("\n".join(problems))
+    return Batch(k0, k1 + 1, dt_s)
+
+
+def solar_unit_torque(s: Scenario, batch: Batch, every: int = SHAPE_EVERY
+                      ) -> tuple[np.ndarray, np.ndarray, float]:
+    """The roll and yaw solar torque of κ = 1 N m over the batch, d̂ × ŝ · (1 AU/r)² ·
+    shadow in an Earth-pointing body (as the truth computes it), every ``every``-th
+    sample: times, torques (M, 2), and the sunlit share of the batch.  It does not
+    depend on ``environment.solar.enabled``, which is the truth's business."""
+    env = build.build_environment(s)
+    stream = TruthStream(build.build_spacecraft(s), build.orbit(s), env,
+                         build.build_control(s), build.build_initial(s), build.epoch(s),
+                         (batch.k1 - 1) * batch.dt_s, batch.dt_s,
+                         rng=np.random.default_rng(0))   # no draws: ``sun`` rolls nothing out
+    lever = np.asarray(env.solar.lever_axis, dtype=float)
+    day = int(round(86400.0 / batch.dt_s))
+    t, torque, sunlit = [], [], 0
+    for a in range(batch.k0, batch.k1, day):
+        b = min(a + day, batch.k1)
+        ts, sun_r, scale = stream.sun(a, b)
+        sunlit += int(np.count_nonzero(scale > 0))
+        keep = (np.arange(a, b) - batch.k0) % every == 0
+        t.append(ts[keep])
+        torque.append(np.cross(lever, sun_r[keep])[:, [0, 2]] * scale[keep, None])
+    return np.concatenate(t), np.concatenate(torque), sunlit / (batch.k1 - batch.k0)
+
+
+def known_torques(s: Scenario, t_s: np.ndarray, speeds_radps: np.ndarray) -> np.ndarray:
+    """(N, 2) roll and yaw torques of the torquers and the commanded dipole profile
+    (``ASSUMED_KNOWN``): the unloading law of ``sim.control`` on the telemetered h,
+    crossed with the field model, Earth pointing."""
+    orbit, env, ctrl = build.orbit(s), build.build_environment(s), build.build_control(s)
+    mag = env.magnetic
+    field = geomag.geo_field_orbit_frame(orbit.longitude_rad, orbit.radius_m,
+                                         moment_Am2=mag.earth_dipole_Am2,
+                                         pole_lat_deg=mag.pole_lat_deg,
+                                         pole_lon_deg=mag.pole_lon_deg)
+    h = yaw_momentum(speeds_radps, build.yaw_factors(s))
+    ok = np.isfinite(h)
+    if not ok.all():   # a dropout: the torquer held what it had, near enough
+        h = np.interp(np.asarray(t_s), np.asarray(t_s)[ok], h[ok])
+    m = np.zeros((len(h), 3))
+    if ctrl.enabled and ctrl.magnetic_unloading:
+        t_des = np.zeros((len(h), 3))
+        t_des[:, 2] = -ctrl.unloading_gain_per_s * h
+        m = np.clip(np.cross(field, t_des) / (field @ field), -ctrl.torquer_max_Am2,
+                    ctrl.torquer_max_Am2)
+    if mag.enabled:
+        m = m + mag.profile(t_s)
+    return np.cross(m, field)[:, [0, 2]]
+
+
+def trim_noise(s: Scenario, noise: em.ProcessNoise) -> em.ProcessNoise:
+    """The batch filter's process noise: Eq. 45's white torque density from
+    ``trim.torque_error_Nm`` and no random walk of the torque states."""
+    q = s.trim.q_Nm2s
+    return dataclasses.replace(noise, q_x=q, q_z=q, q_px=0.0, q_pz=0.0, q_cx=0.0, q_cz=0.0)
+
+
+@dataclass(frozen=True)
+class TrimResult:
+    batch: Batch
+    fit: KappaFit
+    rec: Recommendation
+    sunlit_fraction: float
+    rows_t_s: np.ndarray         # the filter history kept (every ``stride`` samples)
+    torque_xz: np.ndarray        # its roll and yaw torque estimates (N m)
+    shape_t_s: np.ndarray
+    shape_xz: np.ndarray         # the unit-κ solar torque there
+    v: np.ndarray                # its torque states at the batch end
+
+
+def estimate_kappa(s: Scenario, cols: dict[str, np.ndarray], batch: Batch,
+                   stride: int = 125) -> TrimResult:
+    """κ̂ ± σ and the recommendation from the telemetry columns ``cols`` (on the
+    grid, telemetry.csv's names) over ``batch``."""
+    t_shape, shape, sunlit = solar_unit_torque(s, batch)
+    if sunlit == 0:
+        raise TrimError(f"--from-s/--to-s: the batch {batch.from_s:g} … {batch.to_s:g} s has "
+                        "no sunlit time: the solar torque is zero throughout and κ cannot be "
+                        "estimated")
+    t_all = np.asarray(cols["t_s"], dtype=float)
+    k = np.rint(t_all / batch.dt_s).astype(np.int64)
+    sel = (k >= batch.k0) & (k < batch.k1)
+    roll, yaw, speeds, sigma, head = telemetry_inputs(s, cols)
+    pick = [None if v is None else v[sel] for v in (roll, yaw, speeds, sigma, head)]
+    t = t_all[sel]
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, trim_noise(s, noise), batch.dt_s)
+    meas, u, extra = filter_inputs(s, params, *pick, known_Nm=known_torques(s, t, pick[2]))
+    n = len(t)
+    rows = np.unique(np.r_[np.arange(0, n, stride), n - 1])
+    result: FilterResult = kalman_filter(meas, disc, *initial_prior(s, params), u=u,
+                                         extra=extra, rows=rows)
+    torque_states = slice(em.NPX, em.NCZ + 1)
+    theta = result.x[-1, torque_states]
+    P_theta = unpack(result.P_packed[-1])[torque_states, torque_states]
+    v = equivalent_states(t_shape, shape, t[-1], params.omega0_radps)
+    fit = fit_kappa(theta, P_theta, v)
+    solar = s.environment.solar
+    rec = recommend(fit, solar.trim_tab_deg, solar.tab_effectiveness_Nm_per_deg)
+    x = result.x
+    torque_xz = np.column_stack([x[:, em.NPX] + x[:, em.NCX], x[:, em.NPZ] + x[:, em.NCZ]])
+    return TrimResult(batch, fit, rec, sunlit, t[rows], torque_xz, t_shape, shape, v)
+
+
+def true_kappa_Nm(s: Scenario) -> float:
+    """The κ the scenario's truth flies (zero with the solar torque switched off)."""
+    solar = build.build_environment(s).solar
+    return solar.coefficient_Nm if s.environment.solar.enabled else 0.0

@@ -1,0 +1,259 @@
+"""`dynprop trim RUN_DIR`: read a run (or `dynprop estimate`) directory, estimate κ
+(``trim``), write RUN_DIR/trim/ (trim.json, trim.md, trim.png) and, with
+``--verify``, fly the recommended tab over the same span (RUN_DIR/trim/verify/, a
+`dynprop run` directory) and compare before and after."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .csvio import read_csv
+from .loader import load_scenario
+from .schema import Scenario
+from .trim import (
+    ASSUMED_KNOWN,
+    ESTIMATED,
+    TrimError,
+    TrimResult,
+    choose_batch,
+    estimate_kappa,
+    true_kappa_Nm,
+)
+
+
+def telemetry_path(run_dir: Path, given: Path | None) -> Path:
+    """The telemetry the batch filter reads: ``given``, else the run's telemetry.csv,
+    else the file a `dynprop estimate` directory names in its summary."""
+    if given is not None:
+        return given
+    own = run_dir / "telemetry.csv"
+    if own.is_file():
+        return own
+    summary = run_dir / "summary.json"
+    if summary.is_file():
+        named = (json.loads(summary.read_text()).get("telemetry") or {}).get("file")
+        if named and Path(named).is_file():
+            return Path(named)
+    raise TrimError(f"{run_dir}: no telemetry.csv (a run longer than 2 days writes it only "
+                    "with output.telemetry: true); give one with --telemetry FILE")
+
+
+def read_run(run_dir: Path, telemetry: Path | None):
+    """The run's scenario, its telemetry on the filter grid, and whether it has a truth."""
+    from .runs import estimate_inputs
+    if not (run_dir / "scenario.yaml").is_file():
+        raise TrimError(f"{run_dir}: not a run directory (no scenario.yaml)")
+    s = load_scenario(run_dir / "scenario.yaml")
+    grid, _ = estimate_inputs(s, telemetry_path(run_dir, telemetry))
+    return s, grid.columns, (run_dir / "truth.csv").is_file()
+
+
+def _truth_solar(run_dir: Path, batch) -> tuple[np.ndarray, np.ndarray] | None:
+    path = run_dir / "truth.csv"
+    if not path.is_file():
+        return None
+    cols = read_csv(path)
+    t = cols["t_s"]
+    keep = (t >= batch.from_s - 1e-9) & (t <= batch.to_s + 1e-9)
+    return t[keep], np.column_stack([cols["solar_x_Nm"][keep], cols["solar_z_Nm"][keep]])
+
+
+def _end_torque_states(run_dir: Path, to_s: float) -> dict | None:
+    """|N_p| and |N_c| of the run's own (paper) filter at the last estimate.csv row
+    at or before ``to_s``."""
+    path = run_dir / "estimate.csv"
+    if not path.is_file():
+        return None
+    c = read_csv(path)
+    k = int(np.searchsorted(c["t_s"], to_s + 1e-9)) - 1
+    return {"t_s": float(c["t_s"][k]),
+            "periodic_Nm": float(np.hypot(c["N_px_Nm"][k], c["N_pz_Nm"][k])),
+            "constant_Nm": float(np.hypot(c["N_cx_Nm"][k], c["N_cz_Nm"][k]))}
+
+
+def _gap_end_sigma(run_dir: Path) -> list[float] | None:
+    path = run_dir / "summary.json"
+    if not path.is_file():
+        return None
+    return json.loads(path.read_text()).get("yaw_sigma_at_gap_end_deg")
+
+
+def report_dict(s: Scenario, r: TrimResult, truth: bool) -> dict:
+    f, rec, solar = r.fit, r.rec, s.environment.solar
+    out = {
+        "scenario": s.name,
+        "batch": {"from_s": r.batch.from_s, "to_s": r.batch.to_s,
+                  "duration_h": (r.batch.to_s - r.batch.from_s) / 3600.0,
+                  "sunlit_fraction": r.sunlit_fraction},
+        "assumed_known": list(ASSUMED_KNOWN),
+        "estimated": list(ESTIMATED),
+        "tuning": {"torque_error_Nm": s.trim.torque_error_Nm,
+                   "correlation_time_s": s.trim.correlation_time_s,
+                   "q_Nm2s": s.trim.q_Nm2s},
+        "kappa_Nm": f.kappa_Nm, "kappa_sigma_Nm": f.sigma_Nm,
+        "constant_torque_Nm": {"roll": f.constants_Nm[0], "yaw": f.constants_Nm[1]},
+        "constant_torque_sigma_Nm": {"roll": f.constants_sigma_Nm[0],
+                                     "yaw": f.constants_sigma_Nm[1]},
+        "out_of_phase": {"chi2_1dof": f.out_of_phase_chi2, "amplitude_Nm": f.out_of_phase_Nm,
+                         "consistent": f.out_of_phase_chi2 <= 6.63},
+        "recommendation": {"move": rec.move, "trim_tab_deg": rec.trim_tab_deg,
+                           "trim_tab_deg_new": rec.trim_tab_deg_new,
+                           "sigma_deg": rec.sigma_deg,
+                           "residual_after_Nm": rec.residual_after_Nm,
+                           "tab_effectiveness_Nm_per_deg": solar.tab_effectiveness_Nm_per_deg},
+        "truth": None,
+    }
+    if truth:
+        k_true = true_kappa_Nm(s)
+        out["truth"] = {
+            "kappa_Nm": k_true, "solar_enabled": s.environment.solar.enabled,
+            "error_over_sigma": (f.kappa_Nm - k_true) / f.sigma_Nm,
+            "full_trim_tab_deg": solar.untrimmed_torque_Nm / solar.tab_effectiveness_Nm_per_deg,
+            "kappa_after_Nm": k_true - f.kappa_Nm if rec.move else k_true,
+        }
+    return out
+
+
+def _e(v: float) -> str:
+    return f"{v:+.3e}".replace("e-0", "e-").replace("e+0", "e+")
+
+
+def report_md(d: dict) -> str:
+    b, rec, tr = d["batch"], d["recommendation"], d["truth"]
+    lines = [f"# Trim tab from the estimated torque: {d['scenario']}", "",
+             f"Batch {b['from_s']:g} … {b['to_s']:g} s ({b['duration_h']:.1f} h, "
+             f"{100 * b['sunlit_fraction']:.1f}% sunlit).", "",
+             f"**κ̂ = {_e(d['kappa_Nm'])} ± {d['kappa_sigma_Nm']:.2e} N m** (1σ, at 1 AU).", ""]
+    if rec["move"]:
+        lines.append(f"**Recommendation: move the tab from {rec['trim_tab_deg']:.3f}° to "
+                     f"{rec['trim_tab_deg_new']:.3f}° ± {rec['sigma_deg']:.3f}°**, leaving a "
+                     f"residual of about {rec['residual_after_Nm']:.1e} N m (1σ).")
+    else:
+        move = d["kappa_Nm"] / rec["tab_effectiveness_Nm_per_deg"]
+        lines.append(f"**Recommendation: keep the tab at {rec['trim_tab_deg']:.3f}°.** κ̂ is "
+                     f"within 3σ of zero: a move of {move:+.3f}° would be noise (1σ "
+                     f"{rec['sigma_deg']:.3f}°).")
+    c, cs = d["constant_torque_Nm"], d["constant_torque_sigma_Nm"]
+    oop = d["out_of_phase"]
+    lines += ["", "| quantity | value |", "|---|---|",
+              f"| constant roll torque | {_e(c['roll'])} ± {cs['roll']:.1e} N m |",
+              f"| constant yaw torque | {_e(c['yaw'])} ± {cs['yaw']:.1e} N m |",
+              f"| periodic torque out of phase with the Sun | {oop['amplitude_Nm']:.1e} N m, "
+              f"χ²(1) = {oop['chi2_1dof']:.2f}"
+              + ("" if oop["consistent"] else " (**more than the Sun explains: check the "
+                                                 "known torques**)") + " |",
+              f"| tuning: torque error, correlation time | {d['tuning']['torque_error_Nm']:.1e} "
+              f"N m, {d['tuning']['correlation_time_s']:g} s (q = "
+              f"{d['tuning']['q_Nm2s']:.2e} (N m)² s) |"]
+    if tr is not None:
+        lines += [f"| true κ | {_e(tr['kappa_Nm'])} N m"
+                  + ("" if tr["solar_enabled"] else " (solar torque disabled)") + " |",
+                  f"| κ̂ − κ | {tr['error_over_sigma']:+.2f} σ |",
+                  f"| true full-trim tab | {tr['full_trim_tab_deg']:.3f}° |"]
+    lines += ["", "Assumed known:", ""] + [f"- {k}" for k in d["assumed_known"]]
+    lines += ["", "Estimated: " + "; ".join(d["estimated"]) + "."]
+    v = d.get("verify")
+    if v is not None:
+        lines += ["", "## Verification: the recommended tab flown over the same span", "",
+                  "| | before | after |", "|---|---|---|"]
+        def g(x):
+            return f"{x:.2e}"
+        for key, label, f in (("kappa_true_Nm", "true κ (N m)", _e),
+                              ("kappa_Nm", "κ̂ (N m)", _e),
+                              ("kappa_sigma_Nm", "σ(κ̂) (N m)", g),
+                              ("periodic_Nm", "filter \\|N_p\\| at the end (N m)", g),
+                              ("constant_Nm", "filter \\|N_c\\| at the end (N m)", g),
+                              ("gap_end_sigma_deg", "gap-end yaw σ (deg)",
+                               lambda x: ", ".join(f"{e:.4f}" for e in x))):
+            b0, a0 = v["before"].get(key), v["after"].get(key)
+            lines.append(f"| {label} | {'–' if b0 is None else f(b0)} | "
+                         f"{'–' if a0 is None else f(a0)} |")
+        if v.get("residual_fall") is not None:
+            lines += ["", f"The true residual falls {v['residual_fall']:.0f}×."]
+    return "\n".join(lines) + "\n"
+
+
+def _side(s: Scenario, r: TrimResult, run_dir: Path, truth: bool) -> dict:
+    ends = _end_torque_states(run_dir, r.batch.to_s) or {}
+    return {"trim_tab_deg": s.environment.solar.trim_tab_deg,
+            "kappa_true_Nm": true_kappa_Nm(s) if truth else None,
+            "kappa_Nm": r.fit.kappa_Nm, "kappa_sigma_Nm": r.fit.sigma_Nm,
+            "periodic_Nm": ends.get("periodic_Nm"), "constant_Nm": ends.get("constant_Nm"),
+            "gap_end_sigma_deg": _gap_end_sigma(run_dir)}
+
+
+def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) -> dict:
+    """Fly the recommended tab from the start to the batch end (the same span and
+    seed; telemetry written), into ``stage``/verify, and estimate κ again there."""
+    from .rundir import staged_run_dir
+    from .runs import run_to_directory
+    new = load_scenario(run_dir / "scenario.yaml", [
+        f"environment.solar.trim_tab_deg={r.rec.trim_tab_deg_new!r}",
+        f"duration_s={r.batch.to_s!r}", "output.telemetry=true"])
+    out = stage / "verify"
+    with staged_run_dir(out) as vstage:
+        run_to_directory(new, vstage)
+    _, cols, _ = read_run(out, None)
+    after = estimate_kappa(new, cols, choose_batch(cols["t_s"], new.sample_interval_s,
+                                                   r.batch.from_s, r.batch.to_s))
+    result = {"before": _side(s, r, run_dir, truth), "after": _side(new, after, out, True),
+              "residual_fall": None}
+    if truth and result["after"]["kappa_true_Nm"]:
+        result["residual_fall"] = abs(result["before"]["kappa_true_Nm"]) \
+            / abs(result["after"]["kappa_true_Nm"])
+    return result
+
+
+def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = None,
+             telemetry: Path | None = None, do_verify: bool = False) -> dict:
+    """Everything `dynprop trim` does; returns the trim.json dictionary."""
+    from plots.trim import plot_trim
+
+    from .plotting import save_figure
+    from .rundir import staged_run_dir
+    s, cols, truth = read_run(run_dir, telemetry)
+    r = estimate_kappa(s, cols, choose_batch(cols["t_s"], s.sample_interval_s, from_s, to_s))
+    d = report_dict(s, r, truth)
+    with staged_run_dir(run_dir / "trim", force=True) as stage:
+        if do_verify:
+            d["verify"] = verify(s, r, run_dir, stage, truth)
+        (stage / "trim.json").write_text(json.dumps(d, indent=2, allow_nan=False) + "\n")
+        (stage / "trim.md").write_text(report_md(d))
+        true_solar = _truth_solar(run_dir, r.batch)
+        filt = r.torque_xz - np.asarray(r.fit.constants_Nm)
+        fig = plot_trim(r.shape_t_s, r.shape_xz, r.fit.kappa_Nm, r.fit.sigma_Nm, r.rows_t_s,
+                        filt, _title(s, r, d),
+                        *(true_solar if true_solar is not None else (None, None)))
+        save_figure(fig, stage / "trim.png")
+    return d
+
+
+def _title(s: Scenario, r: TrimResult, d: dict) -> str:
+    t = f"{s.name}: κ̂ = {r.fit.kappa_Nm:.3e} ± {r.fit.sigma_Nm:.1e} N m"
+    if d["truth"] is not None:
+        t += f" (true {d['truth']['kappa_Nm']:.3e})"
+    rec = r.rec
+    t += (f"; tab {rec.trim_tab_deg:.2f}° → {rec.trim_tab_deg_new:.3f}° ± {rec.sigma_deg:.3f}°"
+          if rec.move else f"; keep the tab at {rec.trim_tab_deg:.2f}°")
+    return t
+
+
+def one_line(d: dict) -> str:
+    rec = d["recommendation"]
+    text = f"{d['scenario']}: kappa {d['kappa_Nm']:+.3e} +- {d['kappa_sigma_Nm']:.1e} N m; "
+    if rec["move"]:
+        text += (f"move the tab {rec['trim_tab_deg']:.3f} -> {rec['trim_tab_deg_new']:.3f} deg "
+                 f"+- {rec['sigma_deg']:.3f}")
+    else:
+        text += f"keep the tab at {rec['trim_tab_deg']:.3f} deg (kappa within 3 sigma of zero)"
+    if d["truth"] is not None:
+        tr = d["truth"]
+        text += f"; true kappa {tr['kappa_Nm']:+.3e} ({tr['error_over_sigma']:+.2f} sigma)"
+    v = d.get("verify")
+    if v is not None and v["residual_fall"] is not None:
+        text += (f"; verified: true residual {v['before']['kappa_true_Nm']:.2e} -> "
+                 f"{v['after']['kappa_true_Nm']:.2e} N m ({v['residual_fall']:.0f}x)")
+    return text
