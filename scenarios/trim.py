@@ -38,6 +38,9 @@ ASSUMED_KNOWN = (
     "rebuilt from the telemetered wheel momentum h, Earth pointing assumed (a degree "
     "of attitude error changes it by under 2%), and enters the filter as a modelled "
     "torque",
+    "the nominal inertia and the measured roll and pitch: the gravity-gradient torque, "
+    "which the paper's model leaves out (Eq. 6) but which moves by 7e-7 N m per degree "
+    "of roll, also enters as a modelled torque",
     "the tab law κ = untrimmed − effectiveness · tab: only the effectiveness is needed",
 )
 ESTIMATED = ("κ", "a constant roll and a constant yaw torque (residual dipole, gravity-"
@@ -115,20 +118,41 @@ def solar_unit_torque(s: Scenario, batch: Batch, every: int = SHAPE_EVERY
     return np.concatenate(t), np.concatenate(torque), sunlit / (batch.k1 - batch.k0)
 
 
-def known_torques(s: Scenario, t_s: np.ndarray, speeds_radps: np.ndarray) -> np.ndarray:
-    """(N, 2) roll and yaw torques of the torquers and the commanded dipole profile
-    (``ASSUMED_KNOWN``): the unloading law of ``sim.control`` on the telemetered h,
-    crossed with the field model, Earth pointing."""
+def _filled(t_s: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v`` with missing samples (a dropout) interpolated from their neighbours."""
+    ok = np.isfinite(v)
+    return v if ok.all() else np.interp(t_s, t_s[ok], v[ok])
+
+
+def gravity_gradient(s: Scenario, roll_rad: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
+    """(N, 3) body torque 3ω0² n̂ × J n̂ of the nominal inertia at the measured roll
+    and pitch (the nadir n̂ = R2(θ) R1(φ) ẑ does not depend on yaw), as ``sim.dynamics``
+    computes it.  The paper's model leaves it out (Eq. 6); at the trim level it
+    matters: 3ω0²(I_z − I_y) is 7e-7 N m per degree of roll."""
+    J = build.build_spacecraft(s).J
+    w0 = build.orbit(s).rate_radps
+    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
+    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
+    # Third column of C_BR = R2(θ) R1(φ) R3(ψ).
+    n = np.column_stack([-sp * cr, sr, cp * cr])
+    return 3.0 * w0**2 * np.cross(n, n @ J.T)
+
+
+def known_torques(s: Scenario, t_s: np.ndarray, speeds_radps: np.ndarray,
+                  roll_rad: np.ndarray | None = None, pitch_rad: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """(N, 2) roll and yaw torques known from the telemetry and the scenario
+    (``ASSUMED_KNOWN``): the torquers (the unloading law of ``sim.control`` on the
+    telemetered h, crossed with the field model, Earth pointing), the commanded
+    dipole profile, and the gravity gradient at the measured roll and pitch."""
+    t_s = np.asarray(t_s, dtype=float)
     orbit, env, ctrl = build.orbit(s), build.build_environment(s), build.build_control(s)
     mag = env.magnetic
     field = geomag.geo_field_orbit_frame(orbit.longitude_rad, orbit.radius_m,
                                          moment_Am2=mag.earth_dipole_Am2,
                                          pole_lat_deg=mag.pole_lat_deg,
                                          pole_lon_deg=mag.pole_lon_deg)
-    h = yaw_momentum(speeds_radps, build.yaw_factors(s))
-    ok = np.isfinite(h)
-    if not ok.all():   # a dropout: the torquer held what it had, near enough
-        h = np.interp(np.asarray(t_s), np.asarray(t_s)[ok], h[ok])
+    h = _filled(t_s, yaw_momentum(speeds_radps, build.yaw_factors(s)))
     m = np.zeros((len(h), 3))
     if ctrl.enabled and ctrl.magnetic_unloading:
         t_des = np.zeros((len(h), 3))
@@ -137,7 +161,11 @@ def known_torques(s: Scenario, t_s: np.ndarray, speeds_radps: np.ndarray) -> np.
                     ctrl.torquer_max_Am2)
     if mag.enabled:
         m = m + mag.profile(t_s)
-    return np.cross(m, field)[:, [0, 2]]
+    torque = np.cross(m, field)
+    if env.gravity_gradient.enabled and roll_rad is not None:
+        pitch = np.zeros_like(t_s) if pitch_rad is None else _filled(t_s, pitch_rad)
+        torque += gravity_gradient(s, _filled(t_s, roll_rad), pitch)
+    return torque[:, [0, 2]]
 
 
 def trim_noise(s: Scenario, noise: em.ProcessNoise) -> em.ProcessNoise:
@@ -177,7 +205,9 @@ def estimate_kappa(s: Scenario, cols: dict[str, np.ndarray], batch: Batch,
     t = t_all[sel]
     params, noise = build.estimator_model(s)
     disc = discretize(params, trim_noise(s, noise), batch.dt_s)
-    meas, u, extra = filter_inputs(s, params, *pick, known_Nm=known_torques(s, t, pick[2]))
+    pitch = cols["pitch_deg"][sel] * (np.pi / 180.0) if "pitch_deg" in cols else None
+    known = known_torques(s, t, pick[2], pick[0], pitch)
+    meas, u, extra = filter_inputs(s, params, *pick, known_Nm=known)
     n = len(t)
     rows = np.unique(np.r_[np.arange(0, n, stride), n - 1])
     result: FilterResult = kalman_filter(meas, disc, *initial_prior(s, params), u=u,
