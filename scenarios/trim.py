@@ -73,7 +73,7 @@ class Batch:
 def choose_batch(t_s: np.ndarray, dt_s: float, from_s: float | None, to_s: float | None
                  ) -> Batch:
     """The batch on the telemetry's grid (default: all of it); TrimError if it is
-    outside the telemetry or shorter than a quarter orbit."""
+    outside the telemetry or empty (``batch_problems`` judges whether it is enough)."""
     k_all = np.rint(np.asarray(t_s) / dt_s).astype(np.int64)
     lo, hi = int(k_all[0]), int(k_all[-1])
     problems = []
@@ -85,13 +85,26 @@ def choose_batch(t_s: np.ndarray, dt_s: float, from_s: float | None, to_s: float
     if not lo <= k1 <= hi:
         problems.append(f"--to-s: {to_s:g} s is outside the telemetry "
                         f"({lo * dt_s:g} … {hi * dt_s:g} s)")
-    if not problems and (k1 - k0) * dt_s < QUARTER_ORBIT_S - dt_s:   # to the sample
-        problems.append(f"--from-s/--to-s: the batch is {(k1 - k0) * dt_s / 3600:.2f} h, shorter "
-                        f"than a quarter orbit ({QUARTER_ORBIT_S / 3600:.2f} h): too short "
-                        "to tell the orbit-rate solar torque from a constant one")
+    if not problems and k1 <= k0:
+        problems.append(f"--from-s/--to-s: the batch {from_s:g} … {to_s:g} s is empty")
     if problems:
         raise TrimError("\n".join(problems))
     return Batch(k0, k1 + 1, dt_s)
+
+
+def batch_problems(batch: Batch, sunlit_fraction: float) -> list[str]:
+    """Why a batch cannot give κ (one line each), or nothing."""
+    problems = []
+    length = (batch.k1 - 1 - batch.k0) * batch.dt_s
+    if length < QUARTER_ORBIT_S - batch.dt_s:   # to the sample
+        problems.append(f"--from-s/--to-s: the batch is {length / 3600:.2f} h, shorter than a "
+                        f"quarter orbit ({QUARTER_ORBIT_S / 3600:.2f} h): too short to tell "
+                        "the orbit-rate solar torque from a constant one")
+    if sunlit_fraction == 0:
+        problems.append(f"--from-s/--to-s: the batch {batch.from_s:g} … {batch.to_s:g} s has "
+                        "no sunlit time: the solar torque is zero throughout and κ cannot be "
+                        "estimated")
+    return problems
 
 
 def solar_unit_torque(s: Scenario, batch: Batch, every: int = SHAPE_EVERY
@@ -193,10 +206,9 @@ def estimate_kappa(s: Scenario, cols: dict[str, np.ndarray], batch: Batch,
     """κ̂ ± σ and the recommendation from the telemetry columns ``cols`` (on the
     grid, telemetry.csv's names) over ``batch``."""
     t_shape, shape, sunlit = solar_unit_torque(s, batch)
-    if sunlit == 0:
-        raise TrimError(f"--from-s/--to-s: the batch {batch.from_s:g} … {batch.to_s:g} s has "
-                        "no sunlit time: the solar torque is zero throughout and κ cannot be "
-                        "estimated")
+    problems = batch_problems(batch, sunlit)
+    if problems:
+        raise TrimError("\n".join(problems))
     t_all = np.asarray(cols["t_s"], dtype=float)
     k = np.rint(t_all / batch.dt_s).astype(np.int64)
     sel = (k >= batch.k0) & (k < batch.k1)
