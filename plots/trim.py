@@ -65,3 +65,58 @@ def plot_batch_study(table: dict, labels, level_Nm: float):
                  fontsize=10)
     return fig
 
+
+def plot_trim_loop(loop: dict, daily: dict, title: str):
+    """The trim loop (trim_loop.csv beside daily.csv) against the day of the run: the
+    true κ and each κ̂ ± 3σ; the tab flown; the wheel momentum the torquers must
+    unload and their time at the limit; the true attitude; the gap-end yaw error
+    with the filter's ±3σ."""
+    day = np.asarray(loop["day"]) + 0.5
+    fig, axes = plt.subplots(5, 1, figsize=(10, 12), sharex=True,
+                             gridspec_kw={"height_ratios": [3, 1.1, 2, 2, 2.2]})
+    ax = axes[0]
+    ax.step(day, loop["kappa_true_Nm"], where="mid", color="k", lw=1.2, label="true κ")
+    est = np.isfinite(loop["kappa_Nm"])
+    ax.errorbar(np.asarray(loop["day"])[est] + 1.0, loop["kappa_Nm"][est],
+                yerr=3 * loop["kappa_sigma_Nm"][est], fmt="o", ms=4, color="tab:red",
+                capsize=3, label="κ̂ ± 3σ from the span just ended")
+    ax.set_yscale("symlog", linthresh=1e-7, linscale=0.6)
+    ax.axhspan(-1e-7, 1e-7, color="tab:green", alpha=0.12, lw=0, label="±1e-7 N m (trimmed)")
+    ax.set_ylabel("solar imbalance κ (N m)")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(title, fontsize=9)
+
+    ax = axes[1]
+    ax.step(day, loop["trim_tab_deg"], where="mid", color="tab:purple")
+    ax.set_ylabel("tab flown (deg)")
+
+    ax = axes[2]
+    ax.plot(day, loop["h_rms_Nms"], "-o", ms=3, color="tab:blue")
+    ax.set_ylabel("wheel momentum h,\nRMS of the day (N m s)", color="tab:blue")
+    ax2 = ax.twinx()
+    ax2.plot(day, 100 * np.asarray(loop["torquer_saturated_fraction"]), "--",
+             color="tab:orange")
+    ax2.set_ylabel("torquers at their limit (%)", color="tab:orange")
+    ax2.set_ylim(0, 105)
+
+    ax = axes[3]
+    ax.plot(day, loop["roll_rms_deg"], "-", label="roll")
+    ax.plot(day, loop["yaw_rms_deg"], "-", label="yaw")
+    ax.set_ylabel("true attitude,\nRMS of the day (deg)")
+    ax.legend(loc="upper right", fontsize=8)
+
+    ax = axes[4]
+    dd = np.asarray(daily["day"]) + 0.5
+    err, sig = daily["gap_end_yaw_error_deg"], daily["gap_end_yaw_sigma_deg"]
+    has = np.isfinite(sig)
+    ax.fill_between(dd, -3 * sig, 3 * sig, where=has, color="tab:blue", alpha=0.18, lw=0,
+                    label="filter ±3σ at the gap end")
+    ax.plot(dd, err, "o", ms=3, color="tab:red", label="gap-end yaw error")
+    ax.axhline(0, color="0.6", lw=0.6)
+    ax.set_ylabel("estimated − true\nyaw (deg)")
+    ax.set_xlabel("day of the run")
+    ax.legend(loc="upper right", fontsize=8)
+    for a in axes:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig

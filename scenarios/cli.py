@@ -131,6 +131,7 @@ def _build_parser() -> argparse.ArgumentParser:
 # Commands that hold a run's whole arrays in memory (a truth day is ~70 MB of them);
 # `dynprop run` streams in windows and takes any duration the schema allows.
 WHOLE_ARRAY_MAX_S = 30 * 86400.0
+LOOPLESS = ("simulate", "montecarlo", "linearization")   # they simulate without the filter
 
 
 def load_with_overrides(args, streams: bool = False):
@@ -147,6 +148,10 @@ def load_with_overrides(args, streams: bool = False):
         raise InputError(f"duration_s: {s.duration_s:g} s is over {WHOLE_ARRAY_MAX_S:g} s "
                          f"(30 days), the most `dynprop {args.command}` holds in memory; "
                          "`dynprop run` streams longer runs")
+    if s.trim.every_days is not None and args.command in LOOPLESS:
+        raise InputError(f"trim.every_days: the trim loop steers the truth from the filter's "
+                         f"estimates, which only `dynprop run` carries; `dynprop "
+                         f"{args.command}` would fly one tab: remove it or use `dynprop run`")
     return s
 
 

@@ -24,6 +24,7 @@ from plots.errors import plot_errors, plot_estimates
 from plots.run_figures import TORQUE_NAMES, plot_torques
 from plots.season import plot_season
 from plots.telemetry import plot_telemetry_overview
+from plots.trim import plot_trim_loop
 from plots.truth import plot_truth
 
 from .csvio import read_csv
@@ -36,7 +37,7 @@ COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": e
 UNITS = {"roll": "deg", "yaw": "deg", "h": "N m s"}
 # Every figure name a run directory can hold: a redraw removes those not in its set.
 RUN_FIGURES = ("errors.png", "estimates.png", "consistency.png", "torques.png",
-               "telemetry_overview.png", "season.png")
+               "telemetry_overview.png", "season.png", "trim_loop.png")
 SIMULATE_FIGURES = ("truth.png", "telemetry.png")
 
 
@@ -188,6 +189,10 @@ def plot_run_figures(run_dir: Path) -> list[Path]:
         if len(rows["day"]) >= 3:
             names.append("season.png")
             builders["season.png"] = lambda: (plot_season, (rows, title), {})
+        if (run_dir / "trim_loop.csv").is_file():
+            names.append("trim_loop.png")
+            builders["trim_loop.png"] = lambda: (plot_trim_loop, (
+                read_csv(run_dir / "trim_loop.csv"), rows, title), {})
     for stale in set(RUN_FIGURES + SIMULATE_FIGURES) - set(names):
         (out / stale).unlink(missing_ok=True)
     return _draw_all([(*builders[name](), out / name) for name in names])

@@ -336,6 +336,10 @@ class Trim(_Section):
         "takes 5e-6 for an untrimmed spacecraft, an upper limit meant for yaw (N m)")
     correlation_time_s: float = Field(QUARTER_ORBIT_S, gt=0, description="its correlation "
                                       "time; Eq. 45's quarter orbit (s)")
+    every_days: int | None = Field(
+        None, ge=1, description="`dynprop run` only: close the loop, estimating κ from "
+        "each such span of the run's own telemetry and moving the tab as `dynprop trim` "
+        "recommends from the next sample on (trim_loop.csv); null flies the tab fixed (days)")
 
     @property
     def q_Nm2s(self) -> float:
@@ -442,6 +446,10 @@ class Scenario(_Section):
                 problems.append(f"output.interval_s: {interval:g} s is not a whole multiple of "
                                 f"sample_interval_s ({self.sample_interval_s:g} s); nearest: "
                                 + " or ".join(f"{m * self.sample_interval_s:g}" for m in near))
+        every = self.trim.every_days
+        if every is not None and every * 86400.0 >= self.duration_s:
+            problems.append(f"trim.every_days: {every} days is not shorter than the run "
+                            f"({self.duration_s / 86400.0:g} days): the tab would never move")
         for key, d in self.montecarlo.dispersions.items():
             try:
                 check_dispersion(key, leaf_value(self, key), d)

@@ -50,6 +50,7 @@ from .pipeline import (
     truth_torques,
 )
 from .schema import Scenario, output_stride
+from .trim_loop import TrimLoop
 from .twin_stream import TwinFilter, lighten_twin, padded_inputs, twin_window
 
 DAY_S = 86400.0
@@ -84,6 +85,8 @@ class Plan:
 
 def make_plan(s: Scenario, n_samples: int, window_samples: int | None = None) -> Plan:
     dt = s.sample_interval_s
+    if window_samples is None and s.trim.every_days is not None:
+        window_samples = int(round(DAY_S / dt))   # the trim loop decides at day ends
     bounds = window_bounds(n_samples, dt, window_samples)
     stride = output_stride(s)
     pad = int(round(s.estimator.wheel_torque_window_s / dt)) // 2 + 1
@@ -128,6 +131,7 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
         if telemetry_file:
             files["telemetry"] = CsvAppender(Path(out) / "telemetry.csv", exact=True)
     twin_filter = TwinFilter(s, params, disc, plan)
+    loop = None if s.trim.every_days is None else TrimLoop(s, stream, out)
     pending = None
     twin_x = None
     unwritten: list = []     # file rows of windows whose twin is not yet handed on
@@ -149,6 +153,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 tt = truth_torques(truth, mt, params.omega0_radps)
                 rows = output_rows(a, b, plan.stride) - a
                 tel_cols = telemetry_columns(tel, suite)
+                if loop is not None:   # may move the tab for the next window
+                    loop.add(truth, tel_cols, index == len(plan.bounds) - 1)
                 unwritten.append((index, {k: v[rows] for k, v in
                                           truth_columns(truth, tel.sun_visible).items()},
                                   tel_cols))
@@ -184,6 +190,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
     finally:
         for f in files.values():
             f.close()
+        if loop is not None:
+            loop.close()
 
 
 class Demux:

@@ -24,6 +24,7 @@ from .loader import resolved_yaml
 from .outputs import assemble_summary, eq55_sigma_yaw_deg, estimate_columns, write_summary
 from .schema import Scenario, output_writes_telemetry
 from .stream import DAY_S, producer, windows_of
+from .trim_loop import loop_summary
 from .workers import ignore_sigint, sigint_held
 
 QUEUE_ITEMS = 4   # two windows: a real and a twin record each
@@ -156,6 +157,8 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     summary = assemble_summary(s, params, figures.backend, True, True, figures.figures(n))
     summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
                    daily="daily.csv")
+    if s.trim.every_days is not None:
+        summary["trim_loop"] = loop_summary(s, stage / "trim_loop.csv")
     plot_run_figures(stage)
     write_summary(stage / "summary.json", summary)
     return summary

@@ -74,11 +74,14 @@ def _end_torque_states(run_dir: Path, to_s: float) -> dict | None:
             "constant_Nm": float(np.hypot(c["N_cx_Nm"][k], c["N_cz_Nm"][k]))}
 
 
-def _gap_end_sigma(run_dir: Path) -> list[float] | None:
+def _gap_ends(run_dir: Path) -> dict:
+    """The run's gap-end yaw σ and (with a truth) error, from its summary.json."""
     path = run_dir / "summary.json"
     if not path.is_file():
-        return None
-    return json.loads(path.read_text()).get("yaw_sigma_at_gap_end_deg")
+        return {}
+    d = json.loads(path.read_text())
+    return {"gap_end_sigma_deg": d.get("yaw_sigma_at_gap_end_deg"),
+            "gap_end_error_deg": d.get("yaw_error_at_gap_end_deg")}
 
 
 def report_dict(s: Scenario, r: TrimResult, truth: bool) -> dict:
@@ -166,6 +169,8 @@ def report_md(d: dict) -> str:
                               ("kappa_sigma_Nm", "σ(κ̂) (N m)", g),
                               ("periodic_Nm", "filter \\|N_p\\| at the end (N m)", g),
                               ("constant_Nm", "filter \\|N_c\\| at the end (N m)", g),
+                              ("gap_end_error_deg", "gap-end yaw error (deg)",
+                               lambda x: ", ".join(f"{e:+.4f}" for e in x)),
                               ("gap_end_sigma_deg", "gap-end yaw σ (deg)",
                                lambda x: ", ".join(f"{e:.4f}" for e in x))):
             b0, a0 = v["before"].get(key), v["after"].get(key)
@@ -182,7 +187,7 @@ def _side(s: Scenario, r: TrimResult, run_dir: Path, truth: bool) -> dict:
             "kappa_true_Nm": true_kappa_Nm(s) if truth else None,
             "kappa_Nm": r.fit.kappa_Nm, "kappa_sigma_Nm": r.fit.sigma_Nm,
             "periodic_Nm": ends.get("periodic_Nm"), "constant_Nm": ends.get("constant_Nm"),
-            "gap_end_sigma_deg": _gap_end_sigma(run_dir)}
+            **_gap_ends(run_dir)}
 
 
 def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) -> dict:
@@ -214,6 +219,9 @@ def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = No
 
     from .plotting import save_figure
     from .rundir import staged_run_dir
+    if (Path(run_dir) / "trim_loop.csv").is_file():
+        raise TrimError(f"{run_dir}: this run moved its tab as it flew (trim.every_days, see "
+                        "trim_loop.csv); dynprop trim needs a run flown at one tab setting")
     s, cols, truth = read_run(run_dir, telemetry)
     r = estimate_kappa(s, cols, choose_batch(cols["t_s"], s.sample_interval_s, from_s, to_s))
     d = report_dict(s, r, truth)

@@ -9,6 +9,7 @@ per few thousand steps, none per step.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from datetime import datetime
 from functools import lru_cache
@@ -258,7 +259,7 @@ class TruthStream:
         if not (np.isfinite(dt_s) and dt_s > 0):
             raise ValueError("dt_s must be positive")
         self.spacecraft, self.orbit, self.environment = spacecraft, orbit, environment
-        self.epoch, self.dt_s = epoch, dt_s
+        self.control, self.epoch, self.dt_s = control, epoch, dt_s
         self.n_samples = int(np.floor(duration_s / dt_s + 1e-9)) + 1
         n, nw = self.n_samples, spacecraft.n_wheels
         self.sigma = environment.ripple.step_sigma_Nm(dt_s)
@@ -276,6 +277,13 @@ class TruthStream:
         self.gmst0 = ephemeris.gmst_rad(self.jd0)
         self.sun_nodes = _sun_nodes(n, dt_s, self.jd0)
         self.next_start = 0
+
+    def retrim(self, solar) -> None:
+        """Fly ``solar`` (a new trim-tab setting) from the next window on: the ground
+        commanding the tab mid-run (``scenarios.trim_loop``).  Nothing else changes."""
+        self.environment = dataclasses.replace(self.environment, solar=solar)
+        self.p = pack_params(self.spacecraft, self.orbit, self.environment, self.control,
+                             self.dt_s)
 
     def _t(self, k: np.ndarray) -> np.ndarray:
         # Sample times rounded to the nanosecond: exact decimals (4.608, not
