@@ -143,3 +143,10 @@ def test_a_short_batch_and_one_with_no_sunlit_time_exit_2(mistrimmed, capsys):
     rc, _, err = run_cli("trim", str(out.parent / "nowhere"))
     assert rc == 2 and err.count("\n") == 1
     assert (out / "trim" / "trim.json").read_bytes() == before   # nothing was touched
+
+
+def test_every_trim_json_key_is_documented(mistrimmed):
+    from .test_outputs_doc import _spans, json_keys, undocumented
+    _, d, _ = mistrimmed
+    assert d["verify"] is not None
+    assert not undocumented(sorted(json_keys(d)), _spans())

@@ -92,3 +92,11 @@ def test_trim_refuses_a_loop_run_and_the_loop_must_be_shorter_than_the_run(loop_
     assert rc == 2 and err.startswith("dynprop: error: trim.every_days")
     assert "only `dynprop run`" in err and err.count("\n") == 1
     assert not (loop_run.parent / "s").exists()
+
+
+def test_trim_loop_csv_and_its_summary_keys_are_documented(loop_run):
+    from .test_outputs_doc import _spans, csv_columns, json_keys, undocumented
+    spans = _spans()
+    assert not undocumented(csv_columns(loop_run / "trim_loop.csv"), spans)
+    summary = json.loads((loop_run / "summary.json").read_text())
+    assert not undocumented(sorted(json_keys(summary["trim_loop"])), spans)
