@@ -139,7 +139,7 @@ def _filled(t_s: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def gravity_gradient(s: Scenario, roll_rad: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
     """(N, 3) body torque 3ω0² n̂ × J n̂ of the nominal inertia at the measured roll
-    and pitch (the nadir n̂ = R2(θ) R1(φ) ẑ does not depend on yaw), as ``sim.dynamics``
+    and pitch (the nadir n̂ = R2(θ) R1(φ) ẑ does not depend on yaw), as ``eom.gyrostat``
     computes it.  The paper's model leaves it out (Eq. 6); at the trim level it
     matters: 3ω0²(I_z − I_y) is 7e-7 N m per degree of roll."""
     J = build.build_spacecraft(s).J

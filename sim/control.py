@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .dynamics import euler312
+from eom.gyrostat import euler312
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """Environment-torque parameters (paper Section 2.2), each switchable on and off.
 
-The torque *laws* are symbolic and live in ``sim.dynamics``; this module holds
+The torque *laws* are symbolic and live in ``eom.gyrostat``; this module holds
 the frozen parameter sets and the numbers behind their defaults.
 """
 

@@ -3,7 +3,7 @@
 The paper writes the attitude dynamics as second-order equations in the 3-1-2
 angles (Eqs. 3a–3c).  To compare coefficient by coefficient, this module builds
 the angular accelerations (ψ̈, φ̈, θ̈) from the *same* symbolic gyrostat
-equation and torque laws the simulator integrates (``sim.dynamics``), with the
+equation and torque laws the simulator integrates (``eom.gyrostat``), with the
 attitude and rates expressed in Euler angles, and differentiates them with
 CasADi.
 
@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from . import dynamics as dyn
+from eom import gyrostat as dyn
+
 from .frames import GeoOrbit
 from .spacecraft import Spacecraft
 

@@ -24,7 +24,8 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from . import dynamics as dyn
+from eom import gyrostat as dyn
+
 from . import geomag
 from .control import Control, control_law, wheel_allocation
 from .environment import Environment

@@ -12,7 +12,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from sim import dynamics as dyn
+from eom import gyrostat as dyn
 from sim import ephemeris, geomag
 from sim.control import Control
 from sim.environment import Environment, GravityGradient, MagneticTorque, SolarTorque, WheelRipple
