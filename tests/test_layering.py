@@ -1,0 +1,44 @@
+"""The one-way data flow of DESIGN.md, checked on the source: estimator never
+imports sim (nor scenarios or plots), sim never imports estimator, the shared
+packages (rollout, eom) import neither, and plots imports no physics."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+FORBIDDEN = {
+    "estimator": {"sim", "scenarios", "plots"},
+    "sim": {"estimator", "scenarios", "plots"},
+    "eom": {"sim", "estimator", "scenarios", "plots", "rollout"},
+    "rollout": {"sim", "estimator", "scenarios", "plots", "eom"},
+    "plots": {"sim", "estimator", "scenarios", "eom", "rollout"},
+}
+
+
+def imported_packages(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+@pytest.mark.parametrize("package", sorted(FORBIDDEN))
+def test_package_imports_only_what_the_data_flow_allows(package):
+    files = sorted((ROOT / package).rglob("*.py"))
+    assert files
+    bad = {f"{f.relative_to(ROOT)} imports {name}" for f in files
+           for name in imported_packages(f) & FORBIDDEN[package]}
+    assert not bad, sorted(bad)
+
+
+def test_the_check_sees_a_forbidden_import(tmp_path):
+    f = tmp_path / "x.py"
+    f.write_text("import numpy\nfrom sim.truth import TruthStream\nfrom . import model\n")
+    assert imported_packages(f) == {"numpy", "sim"}
