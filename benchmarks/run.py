@@ -141,6 +141,36 @@ def discretize_ms() -> float:
     return 1e3 * min(times)
 
 
+def ekf_over_filter() -> float:
+    """ekf_s_per_day / filter_s_per_day, each the median of 7 one-day runs on the same
+    synthetic day, taken in turn (issue 16's target: ≤ 4)."""
+    from estimator.ekf import EkfInputs, ekf_filter
+    from estimator.kalman import Measurements, kalman_filter
+    from estimator.transition import discretize
+    from scenarios.build import estimator_model
+    from scenarios.ekf_run import ekf_design
+    scenario = load_scenario("goes_next_equinox", ["duration_s=86400"])
+    params, noise = estimator_model(scenario)
+    disc = discretize(params, noise, 0.512)
+    n = 168_750
+    rng = np.random.default_rng(3)
+    yaw = np.where(np.arange(n) * 0.512 / 3600 < 16, rng.normal(0, 6e-4, n), np.nan)
+    roll, pitch, h = (rng.normal(0, s, n) for s in (1.8e-4, 1.8e-4, 4e-4))
+    meas = Measurements(roll, yaw, h, 3.3e-8, 4e-7, 1.5e-7)
+    x0, P0 = np.zeros(9), np.diag([1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12])
+    pm, wn, X0, P0e = ekf_design(scenario)
+    ekf_in = EkfInputs(np.column_stack([roll, pitch, yaw, h]),
+                       np.tile([3.3e-8, 3.3e-8, 4e-7, 1.5e-7], (n, 1)),
+                       np.tile([params.H_Nms, 0.0, 0.0, 0.0, 0.0], (n, 1)))
+    kalman_filter(meas, disc, x0, P0)
+    ekf_filter(ekf_in, pm, wn, X0, P0e)
+    tf, te = [], []
+    for _ in range(7):
+        tf.append(median_time(lambda: kalman_filter(meas, disc, x0, P0), 1, 0))
+        te.append(median_time(lambda: ekf_filter(ekf_in, pm, wn, X0, P0e), 1, 0))
+    return statistics.median(te) / statistics.median(tf)
+
+
 def main() -> None:
     only = sys.argv[1:]
     if only:
@@ -150,7 +180,8 @@ def main() -> None:
                 for (key, unit), value in zip(YEAR_FIGURES, run_365day(), strict=True):
                     report(key, value, unit)
                 continue
-            report(name, globals()[name](), "ms" if name.endswith("_ms") else "s")
+            unit = "ms" if name.endswith("_ms") else "x" if name == "ekf_over_filter" else "s"
+            report(name, globals()[name](), unit)
         return
     report("discretize_ms", discretize_ms(), "ms")
     with tempfile.TemporaryDirectory() as cache:
@@ -185,6 +216,18 @@ def main() -> None:
     x0, P0 = np.zeros(9), np.diag([1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12])
     report("filter_s_per_day", median_time(lambda: kalman_filter(meas, disc, x0, P0),
                                            repeats=5), "s")
+    # Issue 16: the extended Kalman filter on the same day, pitch measured like roll;
+    # its target is a ratio to filter_s_per_day of the same bench run (≤ 4×).
+    from estimator.ekf import EkfInputs, ekf_filter
+    from scenarios.ekf_run import ekf_design
+    pm, wn, X0, P0e = ekf_design(scenario)
+    ekf_in = EkfInputs(
+        np.column_stack([meas.roll_rad, rng.normal(0, 1.8e-4, n), yaw, meas.h_Nms]),
+        np.tile([3.3e-8, 3.3e-8, 4e-7, 1.5e-7], (n, 1)),
+        np.tile([params.H_Nms, 0.0, 0.0, 0.0, 0.0], (n, 1)))
+    ekf_s = median_time(lambda: ekf_filter(ekf_in, pm, wn, X0, P0e), repeats=5)
+    report("ekf_s_per_day", ekf_s, "s")
+    report("ekf_over_filter", ekf_over_filter(), "x")
     report("run_2day_wall_s", cli_wall_s("run", "goes_next_equinox"), "s")
     # Issue 14: a year in one run, streamed (skipped with BENCH_QUICK=1).
     if os.environ.get("BENCH_QUICK") != "1":

@@ -35,11 +35,12 @@ from .reduce import band, f64, interval_stats, max_abs, minmax_line, nice_interv
 #: The paper's yaw 1σ (Eq. 56), in degrees; callers pass ``estimator.covariance``'s.
 PAPER_SIGMA_YAW_DEG = 0.040
 
-REAL, LINEAR, SMOOTH, DIFF, SIGMA = "C3", "C0", "k", "C1", "darkgreen"
+REAL, LINEAR, SMOOTH, DIFF, SIGMA, EKF = "C3", "C0", "k", "C1", "darkgreen", "C4"
 LABEL_REAL = "real: filter on nonlinear-truth telemetry, minus that truth"
 LABEL_LINEAR = "linearized: filter on linear-twin telemetry, minus the twin"
 LABEL_SMOOTH = "smoother, real"
 LABEL_DIFF = "real − linearized"
+LABEL_EKF = "EKF: extended Kalman filter on the same telemetry, minus the truth"
 
 
 def times(ratio: float) -> str:
@@ -86,6 +87,9 @@ def _envelope(ax, t_s, s: dict, interval_s: float) -> None:
     if s.get("smoothed") is not None:
         ax.plot(*_pm(x, interval_stats(t_s, s["smoothed"], interval_s)[3]), color=SMOOTH,
                 lw=0.7, zorder=4, label=LABEL_SMOOTH)
+    if s.get("ekf") is not None:
+        ax.plot(*_pm(x, interval_stats(t_s, s["ekf"], interval_s)[3]), color=EKF, lw=0.9,
+                ls="--", zorder=4, label=LABEL_EKF)
 
 
 def _traces(ax, t_h, s: dict) -> None:
@@ -104,6 +108,8 @@ def _traces(ax, t_h, s: dict) -> None:
     if s.get("smoothed") is not None:
         ax.plot(*minmax_line(t_h, s["smoothed"]), color=SMOOTH, lw=0.5, alpha=0.7, zorder=4,
                 label=LABEL_SMOOTH)
+    if s.get("ekf") is not None:
+        ax.plot(*minmax_line(t_h, s["ekf"]), color=EKF, lw=0.8, zorder=4, label=LABEL_EKF)
 
 
 def _largest(arrays) -> np.ndarray:
@@ -149,6 +155,7 @@ def _error_panel(ax, t_s, t_h, gap, name: str, s: dict, ends, paper: float,
     if marks:
         _paper_marks(ax, t_h, sig, ends, paper)
     errors = {"real error": s["real"], "linearized error": s.get("linear"),
+              "EKF error": s.get("ekf"),
               "smoother error": s.get("smoothed"), "real min": s.get("real_min"),
               "real max": s.get("real_max")}
     errors = {k: v for k, v in errors.items() if v is not None}
@@ -244,7 +251,8 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0,
     ``series[name]`` = {"unit": "deg" | "N m s", "real": estimate − nonlinear truth,
     "sigma": filter 1σ, "style": "envelope" (noisy: per-interval band and RMS) or
     "trace", and optionally "linear": estimate − linear-twin truth, "difference":
-    real − linear computed at full precision, "smoothed": smoother error,
+    real − linear computed at full precision, "smoothed": smoother error, "ekf": the
+    extended Kalman filter's error on the same telemetry,
     "real_min"/"real_max" and "difference_min"/"difference_max": the full-rate
     extremes per row of decimated series (with "row_interval", s),
     "reference": (value, label) drawn or quoted in the difference panel (default: the

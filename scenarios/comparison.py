@@ -73,6 +73,10 @@ def comparison_arrays(runs, t_s, yaw_present, nees_data,
         out.update(truth_model=runs.truth_model * f, err_real=err * f)
         if runs.smoothed is not None:
             out["err_smoothed"] = (runs.smoothed.x - runs.truth_model) * f
+        for name, res in (getattr(runs, "extra", None) or {}).items():
+            # A filter besides the paper's (estimator.filters), on the same telemetry.
+            out[f"err_{name}"] = (res.x - runs.truth_model) * f
+            out[f"sigma_{name}"] = res.sigma * np.abs(f)
     if twin:
         err_lin = runs.linear.x - runs.twin_model
         out["err_linear"] = err_lin * f

@@ -75,7 +75,7 @@ class ComparisonRows:
                 m.flush()
                 self.maps[key] = True
 
-    def add(self, rec: dict, nees_idx, nees_real, nees_lin) -> None:
+    def add(self, rec: dict, nees_idx, nees_real, nees_lin, extra=()) -> None:
         a = rec["start"]
         n = len(rec["t_s"])
         rows = output_rows(a, a + n, self.stride)
@@ -90,7 +90,9 @@ class ComparisonRows:
                 x=rec["linear"].x[k]),
             truth_model=rec["truth_model"][k],
             twin_model=None if rec.get("twin_model") is None else rec["twin_model"][k],
-            sim=SimpleNamespace(truth=SimpleNamespace(euler_rad=rec["euler_rows"])))
+            sim=SimpleNamespace(truth=SimpleNamespace(euler_rad=rec["euler_rows"])),
+            extra={name: SimpleNamespace(x=rec[name].x[k], sigma=rec[name].sigma[k])
+                   for name in extra})
         present = np.isfinite(rec["meas"][1][k])
         nees_data = (np.flatnonzero(at_nees), nees_real[pick],
                      None if nees_lin is None else nees_lin[pick])

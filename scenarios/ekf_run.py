@@ -63,3 +63,32 @@ def run_ekf(s: Scenario, roll, pitch, yaw, speeds, yaw_sigma=None, sun_head=None
     pm, wn, X0, P0 = ekf_design(s)
     inputs = ekf_inputs(s, params, roll, pitch, yaw, speeds, yaw_sigma, sun_head)
     return ekf_filter(inputs, pm, wn, X0, P0, rows=rows, keep_nominal=keep_nominal)
+
+
+class EkfStream:
+    """The EKF through a streamed run's windows (``stream.filtered``), each continuing
+    from the state and covariance the previous one ended with.  Its inputs are made
+    from the window padded with ``plan.pad`` samples of each neighbour, as the paper
+    filter's (``twin_stream.padded_inputs``), so the derivatives N_w* and Ḣ equal the
+    whole run's."""
+
+    def __init__(self, s: Scenario, params: em.ModelParams):
+        self.s, self.params = s, params
+        self.pm, self.wn, self.X, self.P = ekf_design(s)
+
+    def window(self, plan, prev, cur, nxt) -> EkfResult:
+        lo, n, pad = (0 if prev is None else plan.pad), len(cur["t_s"]), plan.pad
+        parts = ([(prev["meas"], prev["pitch"])] if prev is not None else []) \
+            + [(cur["meas"], cur["pitch"])] \
+            + ([(tuple(None if v is None else v[:pad] for v in nxt["meas"]),
+                 nxt["pitch"][:pad])] if nxt is not None else [])
+        meas = [None if parts[0][0][i] is None else np.concatenate([p[0][i] for p in parts])
+                for i in range(len(parts[0][0]))]
+        pitch = np.concatenate([p[1] for p in parts])
+        roll, yaw, speeds, sigma, head = meas
+        full = ekf_inputs(self.s, self.params, roll, pitch, yaw, speeds, sigma, head)
+        sl = slice(lo, lo + n)
+        r = ekf_filter(EkfInputs(full.z[sl], full.r[sl], full.u[sl]), self.pm, self.wn,
+                       self.X, self.P)
+        self.X, self.P = r.x_next, r.P_next
+        return r

@@ -117,6 +117,8 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float):
                          difference_max=c["err_real_minus_linear_max"][:, j])
         if "err_smoothed" in c:
             s["smoothed"] = c["err_smoothed"][:, i]
+        if "err_ekf" in c:
+            s["ekf"] = c["err_ekf"][:, i]
         if n == "yaw":
             s["reference"] = (PAPER_SIGMA_YAW_DEG, "paper σ_yaw (Eq. 56)")
         series[n] = s

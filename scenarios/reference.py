@@ -146,6 +146,8 @@ def _type_name(annotation) -> str:
         if inner.startswith("list of"):
             return f"{len(args)}×{inner.split()[2]} list of floats"
         return f"list of {len(args)} {inner}s"
+    if origin is list:
+        return f"list of {_type_name(typing.get_args(annotation)[0])}"
     if origin in (typing.Union, types.UnionType):
         args = typing.get_args(annotation)
         if type(None) in args and len(args) > 1:   # an optional value: null is allowed

@@ -302,6 +302,10 @@ class ModelTorques(_Section):
 
 
 class Estimator(_Section):
+    filters: list[Literal["paper", "ekf"]] = Field(
+        ["paper"], min_length=1, description="which filters `dynprop run` runs on the same "
+        "telemetry: the paper's linear filter (always, first) and optionally the extended "
+        "Kalman filter on the full nonlinear model (docs/validation.md §8)")
     process_noise: ProcessNoise = Field(default_factory=ProcessNoise)
     initial_sigma: InitialSigma = Field(default_factory=InitialSigma)
     model_torques: ModelTorques = Field(default_factory=ModelTorques)
@@ -446,6 +450,10 @@ class Scenario(_Section):
                 problems.append(f"output.interval_s: {interval:g} s is not a whole multiple of "
                                 f"sample_interval_s ({self.sample_interval_s:g} s); nearest: "
                                 + " or ".join(f"{m * self.sample_interval_s:g}" for m in near))
+        f = self.estimator.filters
+        if f[0] != "paper" or len(set(f)) != len(f):
+            problems.append(f"estimator.filters: {f} must start with paper (every comparison is "
+                            "against the paper's filter) and name each filter once")
         every = self.trim.every_days
         if every is not None and every * 86400.0 >= self.duration_s:
             problems.append(f"trim.every_days: {every} days is not shorter than the run "

@@ -42,8 +42,10 @@ from . import build
 from .columns import telemetry_columns, truth_columns
 from .csvio import CsvAppender
 from .decimate import output_rows
+from .ekf_run import EkfStream
 from .outputs import NEES_STRIDE
 from .pipeline import (
+    DEG,
     initial_prior,
     model_truth,
     telemetry_inputs,
@@ -132,6 +134,7 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
             files["telemetry"] = CsvAppender(Path(out) / "telemetry.csv", exact=True)
     twin_filter = TwinFilter(s, params, disc, plan)
     loop = None if s.trim.every_days is None else TrimLoop(s, stream, out)
+    ekf = "ekf" in s.estimator.filters
     pending = None
     twin_x = None
     unwritten: list = []     # file rows of windows whose twin is not yet handed on
@@ -160,6 +163,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                                   tel_cols))
                 real = {"index": index, "start": a, "stop": b, "t_s": truth.t_s,
                         "meas": telemetry_inputs(s, tel_cols),
+                        # The EKF measures pitch as well (the Earth sensor's).
+                        "pitch": tel_cols["pitch_deg"] * DEG if ekf else None,
                         "tel_rows": {k: v[rows] for k, v in tel_cols.items()},
                         "truth_model": model_truth(params, truth, tt),
                         "shadow": truth.shadow, "euler_rows": truth.euler_rad[rows]}
@@ -245,6 +250,7 @@ def filtered(s: Scenario, records, names=("real", "linear")):
     x0, P0 = initial_prior(s, params)
     keys = {"real": "meas", "linear": "twin_meas"}
     priors = {name: (x0, P0) for name in names}
+    ekf = EkfStream(s, params) if "ekf" in s.estimator.filters else None
     prev, cur = None, next(records, None)
     while cur is not None:
         # The last window needs no look-ahead (and waiting for the stream's end would
@@ -255,10 +261,14 @@ def filtered(s: Scenario, records, names=("real", "linear")):
             result = kalman_filter(meas, disc, *priors[name], u=u, extra=extra)
             priors[name] = (result.x_next, result.P_next)
             cur[name], cur[f"{name}_in"] = result, (u, extra)
+        if ekf is not None and "real" in names:
+            cur["ekf"] = ekf.window(plan, prev, cur, nxt)
         cur["params"] = params
         # The next window's derivative needs only the last samples of this one.
         prev = {keys[name]: tuple(None if v is None else v[-plan.pad:]
                                   for v in cur[keys[name]]) for name in names}
+        if cur.get("pitch") is not None:
+            prev["pitch"] = cur["pitch"][-plan.pad:]
         if "linear" in names:
             lighten_twin(cur)
         yield cur
@@ -315,6 +325,11 @@ def _lighten_real(rec: dict) -> None:
         innovation_var=real.innovation_var, backend=real.backend,
         P_nees=real.P_packed[output_rows(a, a + n, NEES_STRIDE) - a])
     rec.pop("real_in", None)
+    if rec.get("ekf") is not None:
+        e = rec["ekf"]
+        rec["ekf"] = SimpleNamespace(
+            x=e.x, sigma=e.sigma, innovations=e.innovations, innovation_var=e.innovation_var,
+            backend=e.backend, P_nees=e.P_packed[output_rows(a, a + n, NEES_STRIDE) - a])
 
 
 def windows_of(s: Scenario, run: int = 0, window_samples: int | None = None,

@@ -20,6 +20,7 @@ from . import build
 from .accumulate import DailyFigures, RunFigures, window_nees
 from .csvio import CsvAppender, write_csv
 from .decimate import ComparisonRows, output_rows
+from .filter_figures import FilterFigures
 from .loader import resolved_yaml
 from .outputs import assemble_summary, eq55_sigma_yaw_deg, estimate_columns, write_summary
 from .schema import Scenario, output_writes_telemetry
@@ -131,6 +132,9 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     daily = DailyFigures(s, build.epoch(s), n, eq55_sigma_yaw_deg(s, params))
     comparison = ComparisonRows(stage / ".comparison", n, plan.stride)
     estimate = CsvAppender(stage / "estimate.csv")
+    # Filters beside the paper's (estimator.filters): their figures and estimate file.
+    extra = {name: (FilterFigures(name), CsvAppender(stage / f"estimate_{name}.csv"))
+             for name in s.estimator.filters if name != "paper"}
     bar = Progress(n * dt / DAY_S, progress and len(plan.bounds) > 1)
     try:
         for rec in records:
@@ -139,10 +143,14 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
             nees_idx, nees_real, nees_lin = window_nees(rec)
             closed = figures.add(rec, err, err_lin, nees_idx, nees_real, nees_lin)
             daily.add(rec, err, err_lin, nees_idx, nees_real, closed)
-            comparison.add(rec, nees_idx, nees_real, nees_lin)
+            comparison.add(rec, nees_idx, nees_real, nees_lin, tuple(extra))
             k = output_rows(rec["start"], rec["stop"], plan.stride) - rec["start"]
             estimate.append(estimate_columns(rec["t_s"][k], rec["real"].x[k],
                                              rec["real"].sigma[k], params.omega_n_radps))
+            for name, (figs, file) in extra.items():
+                figs.add(rec, closed)
+                file.append(estimate_columns(rec["t_s"][k], rec[name].x[k],
+                                             rec[name].sigma[k], params.omega_n_radps))
             bar.update(rec["stop"] * dt / DAY_S)
             del rec, err, err_lin
     finally:
@@ -151,12 +159,17 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         records.close()
         source.close()
         estimate.close()
+        for _, file in extra.values():
+            file.close()
         bar.close()
     comparison.finish(stage / "comparison.npz", plan.stride * dt)
     write_csv(stage / "daily.csv", daily.columns())
     summary = assemble_summary(s, params, figures.backend, True, True, figures.figures(n))
     summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
                    daily="daily.csv")
+    summary["filters"] = list(s.estimator.filters)
+    for name, (figs, _) in extra.items():
+        summary[name] = figs.summary()
     if s.trim.every_days is not None:
         summary["trim_loop"] = loop_summary(s, stage / "trim_loop.csv")
     plot_run_figures(stage)
