@@ -155,7 +155,7 @@ def assemble_summary(s: Scenario, params, backend: str, truth: bool, twin: bool,
     return {
         "scenario": s.name, "seed": s.seed, "epoch_utc": s.epoch_utc,
         "duration_s": s.duration_s, "dynprop_version": __version__,
-        "backend": backend, "linear_twin": twin, "truth": truth,
+        "backend": backend, "filters": ["paper"], "linear_twin": twin, "truth": truth,
         "yaw_error_rms_deg": f["yaw_rms"],
         "nees_mean_per_state": None if f["per_state"] is None else _per_state(f["per_state"]),
         "yaw_error_rms_linear_deg": f["yaw_rms_linear"],

@@ -167,7 +167,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     summary = assemble_summary(s, params, figures.backend, True, True, figures.figures(n))
     summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
                    daily="daily.csv")
-    summary["filters"] = list(s.estimator.filters)
+    summary["filters"] = list(s.estimator.filters)   # the paper's alone elsewhere
     for name, (figs, _) in extra.items():
         summary[name] = figs.summary()
     if s.trim.every_days is not None:
