@@ -223,7 +223,6 @@ def _cmd_estimate(args) -> int:
     from .runs import estimate_inputs, estimate_to_directory
 
     scenario = load_scenario(args.scenario)
-    note_paper_only(scenario, "estimate")
     check_out_dir(args.out, args.force)
     start = time.perf_counter()
     grid, truth = estimate_inputs(scenario, args.telemetry, args.truth)

@@ -27,6 +27,7 @@ from .pipeline import (
     telemetry_inputs,
     truth_torques,
 )
+from .rundir import RunDirError
 from .runner import simulate, write_simulation
 from .schema import Scenario
 
@@ -112,6 +113,42 @@ def estimate_inputs(s: Scenario, path: Path, truth_path: Path | None = None):
     return grid, truth
 
 
+def _other_filters(s: Scenario, columns: dict) -> dict:
+    """The filters besides the paper's (``estimator.filters``) on the file's telemetry."""
+    if "ekf" not in s.estimator.filters:
+        return {}
+    from .ekf_run import run_ekf
+    from .pipeline import DEG
+    if "pitch_deg" not in columns:
+        raise RunDirError("estimator.filters: the EKF measures pitch, and the telemetry has "
+                          "no pitch_deg column; remove ekf or add the Earth sensor's pitch")
+    return {"ekf": run_ekf(s, *_ekf_measured(s, columns, DEG))}
+
+
+def _ekf_measured(s: Scenario, columns: dict, deg: float):
+    roll, yaw, speeds, sigma, head = telemetry_inputs(s, columns)
+    return roll, columns["pitch_deg"] * deg, yaw, speeds, sigma, head
+
+
+def _filter_summary(name: str, result, truth_model, t_s, summary: dict) -> dict:
+    """summary.json's section of a filter besides the paper's, for a run of one
+    window (the Sun gaps are the paper summary's)."""
+    from types import SimpleNamespace
+
+    from .decimate import output_rows
+    from .filter_figures import FilterFigures
+    from .outputs import NEES_STRIDE
+    dt = float(t_s[1] - t_s[0]) if len(t_s) > 1 else 1.0
+    gaps = [(round(a * 3600 / dt), round(b * 3600 / dt)) for a, b in summary["sun_gaps_h"]]
+    rec = {"start": 0, "t_s": t_s, "truth_model": truth_model, name: SimpleNamespace(
+        x=result.x, sigma=result.sigma, innovations=result.innovations,
+        innovation_var=result.innovation_var, backend=result.backend,
+        P_nees=result.P_packed[output_rows(0, len(t_s), NEES_STRIDE)])}
+    figs = FilterFigures(name)
+    figs.add(rec, [(a, b) for a, b in gaps if b < len(t_s)], truth=truth_model is not None)
+    return figs.summary()
+
+
 def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) -> dict:
     """`dynprop estimate`: the filter and smoother on gridded telemetry
     (``estimate_inputs``), written as a run directory (scenario.yaml, estimate.csv,
@@ -134,16 +171,24 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     runs = TwoRuns(None if truth is None else SimpleNamespace(truth=truth), None, params,
                    truth_model, None, real, None, smoothed, build.yaw_factors(s))
     t = grid.columns["t_s"]
+    extra = _other_filters(s, grid.columns)
     (stage / "scenario.yaml").write_text(resolved_yaml(s))
     write_csv(stage / "estimate.csv",
               estimate_columns(t, real.x, real.sigma, params.omega_n_radps))
+    for name, r in extra.items():
+        write_csv(stage / f"estimate_{name}.csv",
+                  estimate_columns(t, r.x, r.sigma, params.omega_n_radps))
     write_csv(stage / "smoothed.csv",
               estimate_columns(t, smoothed.x, smoothed.sigma, params.omega_n_radps))
     present = np.isfinite(grid.columns["yaw_deg"])
     nees_data = nees_series(runs)
     np.savez(stage / "comparison.npz",
-             **comparison_arrays(runs, t, present, nees_data, grid.columns))
+             **comparison_arrays(SimpleNamespace(**vars(runs), extra=extra), t, present,
+                                 nees_data, grid.columns))
     summary = summarize(s, runs, t, present, nees_data)
+    summary["filters"] = ["paper", *extra]
+    for name, r in extra.items():
+        summary[name] = _filter_summary(name, r, truth_model, t, summary)
     # One key set for every summary: `run`'s output keys, for a file filtered row by row.
     summary.update(output_interval_s=s.sample_interval_s, telemetry_written=None, daily=None)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s)}

@@ -76,3 +76,27 @@ def test_new_files_keys_and_columns_are_documented(runs):
         assert {"err_ekf", "sigma_ekf"} <= set(c.files)
         assert not undocumented(sorted(c.files), spans)
     assert json.loads((out / "summary.json").read_text())["ekf"]["backend"]
+
+
+def test_estimate_on_the_runs_telemetry_reproduces_the_ekf(runs, tmp_path):
+    """`dynprop estimate` with the run's scenario runs the EKF too, on the file's
+    doubles: the same estimate_ekf.csv, byte for byte (every sample written by both)."""
+    from .test_cli_run import run_cli
+    one = runs["one"][0]
+    rc, _, err = run_cli("estimate", str(one / "telemetry.csv"), "--scenario",
+                         str(one / "scenario.yaml"), "--out", str(tmp_path / "est"))
+    assert rc == 0, err
+    assert (tmp_path / "est" / "estimate_ekf.csv").read_bytes() == \
+        (one / "estimate_ekf.csv").read_bytes()
+    summary = json.loads((tmp_path / "est" / "summary.json").read_text())
+    assert summary["filters"] == ["paper", "ekf"] and summary["ekf"]["nees_mean"] is None
+    # Without the Earth sensor's pitch the EKF cannot run: one line, exit 2.
+    text = (one / "telemetry.csv").read_text().splitlines()
+    head = text[0].split(",")
+    k = head.index("pitch_deg")
+    rows = [",".join(c for i, c in enumerate(line.split(",")) if i != k) for line in text]
+    (tmp_path / "nopitch.csv").write_text("\n".join(rows) + "\n")
+    rc, _, err = run_cli("estimate", str(tmp_path / "nopitch.csv"), "--scenario",
+                         str(one / "scenario.yaml"), "--out", str(tmp_path / "never"))
+    assert rc == 2 and err.count("\n") == 1 and "pitch_deg" in err
+    assert not (tmp_path / "never").exists()
