@@ -53,6 +53,9 @@ def plot_ensemble_errors(d: dict, eq55_deg: float, n_runs: int, converged_h: flo
         if "rms_linear" in d:
             ax.plot(t_h, d["rms_linear"][:, k], color="C2", lw=1, ls="--",
                     label="ensemble RMS error, linear twin")
+        if "rms_ekf" in d:
+            ax.plot(t_h, d["rms_ekf"][:, k], color="C4", lw=1, ls=":",
+                    label="ensemble RMS error, EKF on the same telemetry")
         ax.plot(t_h, d["sigma_rms"][:, k], color="C3", lw=1.4, label="filter σ (RMS over runs)")
         ax.plot(t_h, np.abs(d["mean_err"][:, k]), color="0.5", lw=0.5, alpha=0.6,
                 label="|ensemble mean error|")
@@ -87,6 +90,10 @@ def plot_ensemble_nees(d: dict, summary: dict, converged_h: float, caption: str)
         ax.plot(t_h, d["nees_avg_linear"], color="C2", lw=1, ls="--",
                 label="averaged NEES, linear twin "
                 f"({_inside(n['linear']['fraction_after_convergence'])})")
+    if "nees_avg_ekf" in d:
+        ax.plot(t_h, d["nees_avg_ekf"], color="C4", lw=1, ls=":",
+                label="averaged NEES, EKF "
+                f"({_inside(summary['ekf']['nees']['fraction_after_convergence'])})")
     ax.axhspan(lo, hi, color="C1", alpha=0.2,
                label=f"95% bounds for {n['runs']} runs: [{lo:.2f}, {hi:.2f}]")
     ax.axhline(n["dof"], color="C1", lw=1, label=f"expected value {n['dof']}")

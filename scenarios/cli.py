@@ -180,8 +180,6 @@ def _cmd_run(args) -> int:
 
     scenario = load_with_overrides(args, streams=args.montecarlo_case is None)
     case = args.montecarlo_case
-    if case is not None:
-        note_paper_only(scenario, "run --montecarlo-case")
     if case is not None and not scenario.montecarlo.dispersions:
         raise InputError(f"--montecarlo-case: scenario {scenario.name} declares no "
                          "montecarlo.dispersions")
@@ -207,14 +205,6 @@ def _cmd_run(args) -> int:
           f"{time.perf_counter() - start:.1f} s")
     print(f"figures: {out}/plots/")
     return 0
-
-
-def note_paper_only(scenario, command: str) -> None:
-    """Say so when a scenario asks for the EKF where only `dynprop run` runs it."""
-    others = [f for f in scenario.estimator.filters if f != "paper"]
-    if others:
-        print(f"dynprop: note: estimator.filters: {', '.join(others)} runs in `dynprop run` "
-              f"only so far; `dynprop {command}` runs the paper's filter", file=sys.stderr)
 
 
 def _cmd_estimate(args) -> int:
@@ -334,7 +324,6 @@ def _cmd_montecarlo(args) -> int:
     from .montecarlo.store import SetDirectory
 
     scenario = load_with_overrides(args)
-    note_paper_only(scenario, "montecarlo")
     if not scenario.montecarlo.dispersions:
         print(f"dynprop: note: scenario {scenario.name} declares no montecarlo.dispersions; "
               "cases differ only in their noise draws", file=sys.stderr)

@@ -61,11 +61,13 @@ def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = Non
         # sees the telemetry exactly as written, so `dynprop estimate` reproduces it.
         written = write_simulation(stage, sim, truth_writer=in_background, scenario=s)
         runs = run_scenario(s, sim, written, run=run, truth_scenario=flying)
-        summary = _estimate_and_report(s, runs, written, stage, in_background)
+        from .montecarlo.case import other_filters
+        extra = other_filters(s, written)
+        summary = _estimate_and_report(s, runs, written, stage, in_background, extra)
         if case is not None:
             summary.update(montecarlo_case=case, epoch_utc=flying.epoch_utc,
                            dispersed=dispersed)
-            _write_case(s, runs, written, stage, case, dispersed, flying)
+            _write_case(s, runs, written, stage, case, dispersed, flying, extra)
         for w in writers:
             w.wait()
     except BaseException:
@@ -76,7 +78,8 @@ def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = Non
     return summary
 
 
-def _write_case(s: Scenario, runs, written, stage: Path, case: int, dispersed, flying) -> None:
+def _write_case(s: Scenario, runs, written, stage: Path, case: int, dispersed, flying,
+                extra: dict) -> None:
     from .loader import resolved_yaml
     from .montecarlo.case import reduce_case
     from .montecarlo.store import save_case
@@ -84,19 +87,29 @@ def _write_case(s: Scenario, runs, written, stage: Path, case: int, dispersed, f
     if not s.montecarlo.linear_twin:
         runs = replace(runs, linear=None, twin_model=None)
     record, arrays = reduce_case(s, runs, np.isfinite(written["yaw_deg"]), case, dispersed,
-                                 flying.epoch_utc)
+                                 flying.epoch_utc, extra)
     save_case(stage / "montecarlo_case", {"record": record, "arrays": arrays})
 
 
-def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background) -> dict:
+def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
+                         extra: dict) -> dict:
+    from types import SimpleNamespace
     sim = runs.sim
     t = sim.truth.t_s
     present = np.isfinite(written["yaw_deg"])
     in_background(stage / "estimate.csv",
                   estimate_columns(t, runs.real.x, runs.real.sigma, runs.params.omega_n_radps))
+    for name, r in extra.items():
+        in_background(stage / f"estimate_{name}.csv",
+                      estimate_columns(t, r.x, r.sigma, runs.params.omega_n_radps))
     nees_data = nees_series(runs)
-    np.savez(stage / "comparison.npz", **comparison_arrays(runs, t, present, nees_data, written))
+    np.savez(stage / "comparison.npz",
+             **comparison_arrays(SimpleNamespace(**vars(runs), extra=extra), t, present,
+                                 nees_data, written))
     summary = summarize(s, runs, t, present, nees_data)
+    summary["filters"] = ["paper", *extra]
+    for name, r in extra.items():
+        summary[name] = _filter_summary(name, r, runs.truth_model, t, summary)
     from .plotting import plot_run_figures
     plot_run_figures(stage)
     return summary

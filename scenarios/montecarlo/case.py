@@ -48,10 +48,12 @@ def _rms(a) -> float:
 
 
 def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
-                dispersed: dict, epoch_utc: str) -> tuple[dict, dict[str, np.ndarray]]:
+                dispersed: dict, epoch_utc: str, extra: dict | None = None
+                ) -> tuple[dict, dict[str, np.ndarray]]:
     """The case record (JSON) and its grid arrays (float32, display units: deg,
     deg/s, N m s, N m).  ``runs`` holds either the full histories or exactly the
-    rows of ``case_rows``."""
+    rows of ``case_rows``; so does each filter of ``extra`` (name → result: the
+    filters besides the paper's, ``estimator.filters``)."""
     n, dt = len(runs.truth_model), s.sample_interval_s
     grid, gaps, rows = case_rows(s, n, yaw_present)
     full = runs.rows is None
@@ -99,7 +101,30 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
         record["nees_mean_linear"] = nees_mean_lin
         arrays["err_linear"] = (err_l[on_grid] * f).astype(np.float32)
         arrays["nees_linear"] = nees_lin.astype(np.float32)
+    for name, result in (extra or {}).items():
+        err_e, sigma_e, nees_e, mean_e = against(result, runs.truth_model)
+        record[f"yaw_error_{name}_at_gap_end_deg"] = [float(err_e[i, Y] * RAD2DEG)
+                                                      for i in at_end]
+        record[f"yaw_sigma_{name}_at_gap_end_deg"] = [float(sigma_e[i, Y] * RAD2DEG)
+                                                      for i in at_end]
+        record[f"yaw_error_rms_{name}_deg"] = _rms(err_e[on_grid, Y]) * RAD2DEG
+        record[f"nees_mean_{name}"] = mean_e
+        arrays[f"err_{name}"] = (err_e[on_grid] * f).astype(np.float32)
+        arrays[f"sigma_{name}"] = (sigma_e[on_grid] * np.abs(f)).astype(np.float32)
+        arrays[f"nees_{name}"] = nees_e.astype(np.float32)
     return record, arrays
+
+
+def other_filters(s: Scenario, cols: dict, rows=None) -> dict:
+    """The filters besides the paper's (``estimator.filters``) on a case's telemetry
+    columns, their histories at ``rows`` (all samples if None)."""
+    if "ekf" not in s.estimator.filters:
+        return {}
+    from ..ekf_run import run_ekf
+    from ..pipeline import DEG, telemetry_inputs
+    roll, yaw, speeds, sigma, head = telemetry_inputs(s, cols)
+    return {"ekf": run_ekf(s, roll, cols["pitch_deg"] * DEG, yaw, speeds, sigma, head,
+                           rows=rows)}
 
 
 def full_arrays(runs) -> dict[str, np.ndarray]:
@@ -127,7 +152,9 @@ def run_case(s: Scenario, case: int, keep_full: bool = False) -> dict:
         _, _, rows = case_rows(s, len(present), present)
         runs = run_scenario(s, sim, cols, run=case, smooth=False, truth_scenario=flying,
                             rows=None if keep_full else rows, twin=s.montecarlo.linear_twin)
-        record, arrays = reduce_case(s, runs, present, case, dispersed, flying.epoch_utc)
+        extra = other_filters(s, cols, None if keep_full else rows)
+        record, arrays = reduce_case(s, runs, present, case, dispersed, flying.epoch_utc,
+                                     extra)
         full = full_arrays(runs) if keep_full else None
         return {"record": record, "arrays": arrays, "full": full,
                 "wall_s": time.perf_counter() - start}

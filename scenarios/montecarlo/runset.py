@@ -121,6 +121,10 @@ def one_line(summary: dict) -> str:
     for g in summary["gap_end_yaw"]:
         parts.append(f"yaw at gap {g['gap']} end: {gap_quantiles(g)} vs filter σ "
                      f"{g['predicted_sigma_deg']:.4f} deg")
+    e = summary.get("ekf")
+    if e is not None and e["nees"]["fraction_after_convergence"] is not None:
+        parts.append(f"EKF: averaged NEES {e['nees']['mean_after_convergence']:.2f}, inside "
+                     f"{100 * e['nees']['fraction_after_convergence']['inside']:.0f}%")
     parts.append(f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg")
     return "; ".join(parts)
 

@@ -97,6 +97,29 @@ def _root(v):
     return None if v is None else float(np.sqrt(v))
 
 
+def _other_filter(name: str, mean: dict, conv, bounds, wanted: dict, ok: list, n_gaps: int,
+                  fig: dict) -> dict:
+    """montecarlo.json's section of a filter besides the paper's (``estimator.filters``):
+    its ensemble RMS and σ after convergence, averaged NEES, and gap-end yaw."""
+    nees_avg = mean[f"nees_{name}"]
+    out = {"nees": {"mean_after_convergence": _mean(nees_avg[conv]),
+                    "fraction_after_convergence": _fraction(nees_avg[conv], *bounds)},
+           "rms_after_convergence": {
+               col: {"ensemble_rms": _root(_mean(mean[f"err2_{name}"][conv, k])),
+                     "filter_sigma_rms": _root(_mean(mean[f"sig2_{name}"][conv, k]))}
+               for col, k in (("roll_deg", R), ("yaw_deg", Y), ("h_Nms", H_WHEEL))},
+           "gap_end_yaw": []}
+    fig[f"rms_{name}"] = np.sqrt(mean[f"err2_{name}"])
+    fig[f"nees_avg_{name}"] = nees_avg
+    for j in range(n_gaps):
+        have = [k for k in ok if len(wanted[k][f"yaw_error_{name}_at_gap_end_deg"]) > j]
+        e = np.array([wanted[k][f"yaw_error_{name}_at_gap_end_deg"][j] for k in have])
+        sg = np.array([wanted[k][f"yaw_sigma_{name}_at_gap_end_deg"][j] for k in have])
+        out["gap_end_yaw"].append({"gap": j + 1, **_gap_stats(e, sg)})
+        fig[f"gap{j + 1}_yaw_error_{name}_deg"] = e
+    return out
+
+
 def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
              command: str) -> tuple[dict, dict[str, np.ndarray]]:
     """montecarlo.json and the arrays the figures are drawn from (montecarlo.npz)."""
@@ -117,6 +140,7 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
     # of two-day cases never holds its grids all at once.
     sums: dict[str, np.ndarray] = {}
     linear = True
+    others = [f for f in s.estimator.filters if f != "paper"]
     for k in ok:
         a = load_arrays(k)
         err, sig = a["err"].astype(float), a["sigma"].astype(float)
@@ -126,6 +150,13 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
         if linear:
             terms["err2_linear"] = a["err_linear"].astype(float) ** 2
             terms["nees_linear"] = a["nees_linear"].astype(float)
+        for name in others:
+            if f"err_{name}" not in a:
+                raise ValueError(f"case {k} has no {name} arrays: it was run without that "
+                                 "filter (rerun it with --retry-failed after removing it)")
+            terms[f"err2_{name}"] = a[f"err_{name}"].astype(float) ** 2
+            terms[f"sig2_{name}"] = a[f"sigma_{name}"].astype(float) ** 2
+            terms[f"nees_{name}"] = a[f"nees_{name}"].astype(float)
         for name, v in terms.items():
             sums[name] = sums[name] + v if name in sums else v
         t_s = a["t_s"]
@@ -181,6 +212,8 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
             fig[f"gap{j + 1}_yaw_error_linear_deg"] = el
         gaps.append(g)
     summary["gap_end_yaw"] = gaps
+    for name in others:
+        summary[name] = _other_filter(name, mean, conv, bounds, wanted, ok, n_gaps, fig)
     summary["nees"]["per_state_test_95"] = per_state_test(summary["nees"])
     summary["nees"]["diagnosis"] = diagnose(summary["nees"])
     fig["gaps_h"] = np.array([[g["start_h_median"], g["end_h_median"]] for g in gaps]
