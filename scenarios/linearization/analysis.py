@@ -12,10 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimator.consistency import chi2_bounds, fraction_inside
+from estimator.consistency import chi2_bounds, fraction_inside, nees
+from estimator.kalman import unpack
 from estimator.model import N_STATES, R, Y
 
 from .. import build
+from ..ekf_run import run_ekf
 from ..outputs import nees_series, sun_gaps
 from ..pipeline import run_scenario
 from ..runner import simulate
@@ -51,16 +53,25 @@ def _gap(tel, s: Scenario):
     return present, [(int(a), int(b)) for a, b in gaps]
 
 
-def _estimation(runs, present, gaps) -> dict:
-    """Filter on nonlinear and on linear telemetry: yaw at the gap ends and NEES over
-    the second half of the run (after the start-up transient)."""
+def _ekf(v: Scenario, runs):
+    """The extended Kalman filter on the case's own (nonlinear-truth) telemetry."""
+    tel = runs.sim.telemetry
+    head = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
+    return run_ekf(v, tel.roll_rad, tel.pitch_rad, tel.yaw_rad, tel.wheel_speeds_radps,
+                   tel.yaw_sigma_rad, head)
+
+
+def _estimation(runs, present, gaps, ekf=None) -> dict:
+    """Filter on nonlinear and on linear telemetry, and the EKF on the nonlinear:
+    yaw at the gap ends and NEES over the second half of the run (after the
+    start-up transient)."""
     ends = [b for _, b in gaps if b < len(present)]
     err = runs.real.x - runs.truth_model
     err_lin = runs.linear.x - runs.twin_model
     idx, n_real, n_lin = nees_series(runs)
     late = idx >= len(present) // 2
     bounds = chi2_bounds(N_STATES, 1)
-    return {
+    out = {
         "yaw_error_gap_end_real_deg": [float(err[b, Y] / DEG) for b in ends],
         "yaw_error_gap_end_linear_deg": [float(err_lin[b, Y] / DEG) for b in ends],
         "yaw_sigma_gap_end_deg": [float(runs.real.sigma[b, Y] / DEG) for b in ends],
@@ -73,6 +84,16 @@ def _estimation(runs, present, gaps) -> dict:
         "within_3sigma_at_gap_ends": bool(all(abs(err[b, Y]) <= 3 * runs.real.sigma[b, Y]
                                               for b in ends)),
     }
+    if ekf is not None:
+        err_e = ekf.x - runs.truth_model
+        n_e = nees(ekf.x[idx], unpack(ekf.P_packed[idx]), runs.truth_model[idx])
+        out.update({
+            "yaw_error_gap_end_ekf_deg": [float(err_e[b, Y] / DEG) for b in ends],
+            "yaw_sigma_gap_end_ekf_deg": [float(ekf.sigma[b, Y] / DEG) for b in ends],
+            "nees_mean_ekf": float(np.mean(n_e[late])),
+            "ekf_within_3sigma_at_gap_ends": bool(all(abs(err_e[b, Y]) <= 3 * ekf.sigma[b, Y]
+                                                      for b in ends))})
+    return out
 
 
 def run_sweep(s: Scenario, progress=None) -> SweepOutput:
@@ -109,7 +130,8 @@ def run_sweep(s: Scenario, progress=None) -> SweepOutput:
             env[f"{name}_yaw"] = envelope(e[:, 2] / DEG)
         env["t_s"] = truth.t_s[::64][:len(env["eq11_yaw"])]
         cases.append({"kind": kind, "delta_deg": delta, "overrides": changes,
-                      "divergence": div, "estimation": _estimation(runs, present, gaps)})
+                      "divergence": div,
+                      "estimation": _estimation(runs, present, gaps, _ekf(v, runs))})
         envs[(kind, delta)] = env
         del runs, truth
         if progress:
