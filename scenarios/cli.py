@@ -203,6 +203,16 @@ def _cmd_run(args) -> int:
     print(f"{scenario.name}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; {at_ends}"
           f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f}); "
           f"{time.perf_counter() - start:.1f} s")
+    e = summary.get("ekf")
+    if e is not None and e["yaw_error_at_gap_end_deg"] is not None:
+        ratios = [x / sg for x, sg in zip(e["yaw_error_at_gap_end_deg"],
+                                          e["yaw_sigma_at_gap_end_deg"], strict=True)]
+        worst = max(ratios, key=abs, default=None)
+        print(f"EKF: yaw error RMS {e['yaw_error_rms_deg']:.4f} deg; "
+              + (f"worst Sun-gap end {worst:+.2f} sigma (paper's filter "
+                 f"{max((x / sg for x, sg in zip(errs, sigs, strict=True)), key=abs):+.2f})"
+                 if worst is not None else "no Sun-gap end")
+              + f"; mean NEES {e['nees_mean']:.2f} (paper's {summary['nees_mean']:.2f})")
     print(f"figures: {out}/plots/")
     return 0
 
