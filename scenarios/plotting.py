@@ -159,12 +159,9 @@ def _telemetry_job(c: dict, gap, title: str):
         {"yaw_sigma": c.get("tel_yaw_sigma_deg"), "sun_head": c.get("tel_sun_head")}
 
 
-def plot_run_figures(run_dir: Path) -> list[Path]:
-    """The figures of a `run` or `estimate` directory, from scenario.yaml and
-    comparison.npz (and daily.csv for season.png, when it holds three days or more);
-    the set is ``figure_set`` of the stored keys, and figures of another set left by
-    an earlier drawing are removed.  (The second argument
-    is accepted and ignored: callers used to pass the telemetry columns.)"""
+def _run_builders(run_dir: Path) -> tuple[list[str], dict]:
+    """The figure names of a `run` or `estimate` directory and, for each, a builder
+    returning (drawing function, args, kwargs)."""
     run_dir = Path(run_dir)
     scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
     title = _title(scenario)
@@ -180,8 +177,6 @@ def plot_run_figures(run_dir: Path) -> list[Path]:
         "torques.png": lambda: _torques_job(c, gap, title),
         "telemetry_overview.png": lambda: _telemetry_job(c, gap, title),
     }
-    out = run_dir / "plots"
-    out.mkdir(exist_ok=True)
     names = figure_set(c)
     daily = run_dir / "daily.csv"
     if daily.is_file():
@@ -195,6 +190,30 @@ def plot_run_figures(run_dir: Path) -> list[Path]:
             names.append("trim_loop.png")
             builders["trim_loop.png"] = lambda: (plot_trim_loop, (
                 read_csv(run_dir / "trim_loop.csv"), rows, title), {})
+    return names, builders
+
+
+def run_figure(run_dir: Path, name: str):
+    """One figure of a `run` or `estimate` directory as a matplotlib Figure, the very
+    drawing ``plot_run_figures`` saves (``name`` without ".png": "errors", ...)."""
+    names, builders = _run_builders(run_dir)
+    key = name if name.endswith(".png") else f"{name}.png"
+    if key not in names:
+        raise KeyError(f"no figure {name!r} for this run; it has "
+                       + ", ".join(n[:-4] for n in names))
+    fn, args, kwargs = builders[key]()
+    return fn(*args, **kwargs)
+
+
+def plot_run_figures(run_dir: Path) -> list[Path]:
+    """The figures of a `run` or `estimate` directory, from scenario.yaml and
+    comparison.npz (and daily.csv for season.png, when it holds three days or more);
+    the set is ``figure_set`` of the stored keys, and figures of another set left by
+    an earlier drawing are removed."""
+    run_dir = Path(run_dir)
+    names, builders = _run_builders(run_dir)
+    out = run_dir / "plots"
+    out.mkdir(exist_ok=True)
     for stale in set(RUN_FIGURES + SIMULATE_FIGURES) - set(names):
         (out / stale).unlink(missing_ok=True)
     return _draw_all([(*builders[name](), out / name) for name in names])

@@ -424,6 +424,11 @@ class Scenario(_Section):
     def _ignore_version(cls, v):
         return None
 
+    def __str__(self) -> str:
+        """The resolved YAML: every key with its value, as scenario.yaml holds it."""
+        from .loader import resolved_yaml
+        return resolved_yaml(self)
+
     @field_validator("epoch_utc")
     @classmethod
     def _epoch(cls, v: str) -> str:

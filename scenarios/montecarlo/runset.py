@@ -86,11 +86,9 @@ def caption(s: Scenario, summary: dict, command: str) -> str:
             f"{command}")
 
 
-def draw_figures(plots: Path, s: Scenario, summary: dict, fig: dict, command: str) -> None:
+def ensemble_figures(s: Scenario, summary: dict, fig: dict, command: str) -> dict:
+    """The set's figures as matplotlib Figures, by file name (``FIGURES``)."""
     from plots.montecarlo import plot_ensemble_errors, plot_ensemble_nees, plot_gap_end_yaw
-
-    from ..plotting import save_figure
-    plots.mkdir(exist_ok=True)
     text = caption(s, summary, command)
     conv = s.montecarlo.converged_after_h
     figures = (
@@ -99,7 +97,13 @@ def draw_figures(plots: Path, s: Scenario, summary: dict, fig: dict, command: st
         plot_ensemble_nees(fig, summary, conv, text),
         plot_gap_end_yaw(fig, summary, text),
     )
-    for name, f in zip(FIGURES, figures, strict=True):
+    return dict(zip(FIGURES, figures, strict=True))
+
+
+def draw_figures(plots: Path, s: Scenario, summary: dict, fig: dict, command: str) -> None:
+    from ..plotting import save_figure
+    plots.mkdir(exist_ok=True)
+    for name, f in ensemble_figures(s, summary, fig, command).items():
         save_figure(f, plots / name)
 
 

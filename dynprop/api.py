@@ -1,0 +1,149 @@
+"""The functions of ``import dynprop``: the same code the CLI runs, returning result
+objects (``results``) instead of printing.  Each writes exactly the run directory
+its command writes, into a temporary directory that ``save`` copies out."""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from pathlib import Path
+
+from scenarios.loader import ScenarioError
+from scenarios.schema import Scenario
+
+from .results import (
+    LinearizationResult,
+    MonteCarloResult,
+    RunResult,
+    SimulationResult,
+    TextReport,
+)
+
+__all__ = ["ScenarioError", "covariance", "linearization", "load_scenario", "montecarlo",
+           "observability", "open_run", "run", "simulate"]
+
+
+def load_scenario(name_or_path: str | Path, set: dict | None = None, **overrides
+                  ) -> Scenario:
+    """A validated scenario: a bundled name (``dynprop scenarios`` lists them) or a
+    YAML file, with overrides as ``--set`` gives them, by dotted key in ``set`` or
+    as keywords for top-level keys (SI units, or the unit the key names)::
+
+        s = dynprop.load_scenario("goes_next_equinox", duration_s=21600,
+                                  set={"spacecraft.wheels.speed_rpm": 5000})
+        print(s)   # the resolved YAML, every key
+
+    A bad name, key, type or value raises ``ScenarioError`` with the CLI's message:
+    one line per problem, a typo with the closest valid key."""
+    pairs = {**(set or {}), **overrides}
+    # JSON is YAML: every value reaches the loader as the CLI's --set would give it.
+    return _load(name_or_path, [f"{k}={json.dumps(v)}" for k, v in pairs.items()])
+
+
+def _load(source, items: list[str]) -> Scenario:
+    from scenarios.loader import load_scenario as load
+    return load(source, items)
+
+
+def _scenario(s) -> Scenario:
+    return s if isinstance(s, Scenario) else load_scenario(s)
+
+
+def _temporary(prefix: str) -> tuple[Path, Path]:
+    """A private directory for a result (removed with the result object), and the run
+    directory inside it that the command's code writes."""
+    owner = Path(tempfile.mkdtemp(prefix=f"dynprop-{prefix}-"))
+    return owner, owner / "run"
+
+
+def simulate(scenario: Scenario | str) -> SimulationResult:
+    """Truth and telemetry (`dynprop simulate`)::
+
+        sim = dynprop.simulate(s)
+        sim.truth[["roll_deg", "yaw_deg"]].plot()"""
+    from scenarios.rundir import staged_run_dir
+    from scenarios.runner import simulate as sim
+    from scenarios.runner import write_simulation
+    s = _scenario(scenario)
+    owner, out = _temporary("simulate")
+    result = sim(s)
+    with staged_run_dir(out) as stage:
+        write_simulation(stage, result)
+    return SimulationResult(out, owner)
+
+
+def run(scenario: Scenario | str) -> RunResult:
+    """Truth, telemetry, the paper's filter on it and on the linear twin (and the
+    EKF with ``estimator.filters``), as `dynprop run`::
+
+        r = dynprop.run(s)
+        r.summary["yaw_error_at_gap_end_deg"], r.errors()["yaw_deg"].abs().max()
+        r.figure("errors"); r.save("runs/eq")"""
+    from scenarios.rundir import staged_run_dir
+    from scenarios.runs import run_to_directory
+    s = _scenario(scenario)
+    owner, out = _temporary("run")
+    with staged_run_dir(out) as stage:
+        run_to_directory(s, stage)
+    return RunResult(out, owner)
+
+
+def open_run(path: str | Path):
+    """A directory written by the CLI or by ``save``: a `run`/`estimate` directory
+    as ``RunResult``, a Monte Carlo set as ``MonteCarloResult``, a `simulate` one as
+    ``SimulationResult``.  The files are read in place."""
+    from scenarios.rundir import RunDirError
+    path = Path(path)
+    if (path / "montecarlo.json").is_file():
+        return MonteCarloResult(path)
+    if (path / "summary.json").is_file():
+        return RunResult(path)
+    if (path / "truth.csv").is_file():
+        return SimulationResult(path)
+    raise RunDirError(f"{path}: not a run directory (no summary.json, montecarlo.json "
+                      "or truth.csv)")
+
+
+def montecarlo(scenario: Scenario | str, runs: int = 20, workers: int | None = None,
+               scheduler: str | None = None) -> MonteCarloResult:
+    """The dispersed ensemble (`dynprop montecarlo`) on ``workers`` local processes
+    (default: every core) or a dask ``scheduler`` address::
+
+        mc = dynprop.montecarlo(s, runs=10)
+        mc.summary["nees"]["mean_after_convergence"]; mc.figure("mc_nees")"""
+    from scenarios.montecarlo.runset import run_set
+    s = _scenario(scenario)
+    owner, out = _temporary("montecarlo")
+    # The set's own scenario.yaml reruns case K wherever the set is saved.
+    command = "dynprop run DIR/scenario.yaml --montecarlo-case K"
+    run_set(s, runs, out, workers, scheduler, command=command)
+    return MonteCarloResult(out, owner)
+
+
+def linearization(scenario: Scenario | str) -> LinearizationResult:
+    """Which linearization assumption breaks first (`dynprop linearization`)::
+
+        lin = dynprop.linearization(s); print(lin.verdict); lin.save("runs/lin")"""
+    from scenarios.linearization.report import build_report
+    s = _scenario(scenario)
+    report, arrays = build_report(s, f"dynprop linearization {s.name} --out DIR")
+    return LinearizationResult(report, arrays)
+
+
+def observability(scenario: Scenario | str) -> TextReport:
+    """Section 4's rank tables (`dynprop observability`)."""
+    from estimator.observability import format_rank_table
+    from scenarios.build import estimator_model
+    params, _ = estimator_model(_scenario(scenario))
+    return TextReport(format_rank_table(params))
+
+
+def covariance(scenario: Scenario | str) -> TextReport:
+    """Section 6's steady-state yaw σ by every method against the paper's 0.040°
+    (`dynprop covariance`); ``.data`` is the report's dict."""
+    from estimator.covariance import covariance_report, format_covariance_report
+    from scenarios.build import estimator_model, estimator_sensor_specs
+    s = _scenario(scenario)
+    params, noise = estimator_model(s)
+    report = covariance_report(params, noise, estimator_sensor_specs(s))
+    return TextReport(format_covariance_report(report), report)

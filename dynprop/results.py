@@ -1,0 +1,180 @@
+"""What the API functions return: a run directory (the very files the command
+writes) seen as pandas tables, a dict and figures.
+
+A result made by ``dynprop.run`` or ``dynprop.montecarlo`` lives in a private
+temporary directory until ``save(dir)`` copies it out whole (staged, so a
+directory is never half written) or the object is collected; ``open_run`` reads
+an existing one in place.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import weakref
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from scenarios.csvio import read_csv
+from scenarios.outputs import STATE_COLUMNS
+from scenarios.rundir import staged_run_dir
+
+
+def _table(path: Path) -> pd.DataFrame | None:
+    """A CSV of the run as a DataFrame indexed by ``t_s`` (None if not written)."""
+    if not path.is_file():
+        return None
+    cols = read_csv(path)
+    index = pd.Index(cols.pop("t_s"), name="t_s") if "t_s" in cols else None
+    return pd.DataFrame(cols, index=index)
+
+
+class _Directory:
+    """A directory of files the CLI writes, owned (temporary) or borrowed."""
+
+    def __init__(self, path: Path, owner: Path | None = None):
+        self.path = Path(path)
+        self._owner = owner
+        if owner is not None:
+            # The temporary directory goes with the object (or at exit), silently.
+            weakref.finalize(self, shutil.rmtree, owner, True)
+
+    def save(self, out: str | Path, force: bool = False) -> Path:
+        """Copy every file to ``out``: byte for byte what the command writes there.
+        ``out`` must not exist unless ``force`` (then it is replaced whole)."""
+        from scenarios.rundir import check_out_dir
+        out = Path(out)
+        check_out_dir(out, force)
+        with staged_run_dir(out, force=force) as stage:
+            shutil.copytree(self.path, stage, dirs_exist_ok=True)
+        return out
+
+    def __repr__(self) -> str:
+        where = "temporary" if self._owner is not None else str(self.path)
+        return f"<{type(self).__name__} {where}>"
+
+
+class SimulationResult(_Directory):
+    """`dynprop simulate`: ``truth`` and ``telemetry`` (DataFrames indexed by t_s)."""
+
+    @property
+    def truth(self) -> pd.DataFrame:
+        return _table(self.path / "truth.csv")
+
+    @property
+    def telemetry(self) -> pd.DataFrame:
+        return _table(self.path / "telemetry.csv")
+
+    @property
+    def scenario_yaml(self) -> str:
+        return (self.path / "scenario.yaml").read_text()
+
+
+class RunResult(SimulationResult):
+    """`dynprop run` or `dynprop estimate`: ``truth``, ``telemetry`` (None when not
+    written: `output.telemetry`), ``estimate`` (and ``estimate_ekf`` with
+    `estimator.filters: [paper, ekf]`), ``daily``, ``summary`` (dict), ``errors()``
+    and ``figure(name)``."""
+
+    @property
+    def estimate(self) -> pd.DataFrame:
+        return _table(self.path / "estimate.csv")
+
+    @property
+    def estimate_ekf(self) -> pd.DataFrame | None:
+        return _table(self.path / "estimate_ekf.csv")
+
+    @property
+    def daily(self) -> pd.DataFrame | None:
+        return _table(self.path / "daily.csv")
+
+    @property
+    def summary(self) -> dict:
+        return json.loads((self.path / "summary.json").read_text())
+
+    def errors(self, filter: str = "paper") -> pd.DataFrame:
+        """Estimate − truth at the output rows, in estimate.csv's columns and units
+        (comparison.npz's ``err_real``, or ``err_ekf`` for ``filter="ekf"``)."""
+        key = "err_real" if filter == "paper" else f"err_{filter}"
+        with np.load(self.path / "comparison.npz") as c:
+            if key not in c.files:
+                raise KeyError(f"this run has no {key} (no truth, or no {filter} filter)")
+            return pd.DataFrame(c[key].astype(float), columns=list(STATE_COLUMNS),
+                                index=pd.Index(c["t_s"], name="t_s"))
+
+    def figure(self, name: str = "errors"):
+        """A figure of the run as a matplotlib Figure, the drawing the CLI saves in
+        plots/ ("errors", "consistency", "torques", "telemetry_overview", "season")."""
+        from scenarios.plotting import run_figure
+        return run_figure(self.path, name)
+
+
+class MonteCarloResult(_Directory):
+    """`dynprop montecarlo`: ``summary`` (montecarlo.json), ``cases`` (one row per
+    case record) and ``figure(name)`` ("mc_errors", "mc_nees", "mc_gap_yaw")."""
+
+    @property
+    def summary(self) -> dict:
+        return json.loads((self.path / "montecarlo.json").read_text())
+
+    @property
+    def cases(self) -> pd.DataFrame:
+        records = [json.loads(p.read_text())
+                   for p in sorted((self.path / "cases").glob("case-*.json"))]
+        return pd.DataFrame(records).set_index("case") if records else pd.DataFrame()
+
+    def figure(self, name: str = "mc_nees"):
+        from scenarios.loader import load_scenario
+        from scenarios.montecarlo.runset import ensemble_figures
+        summary = self.summary
+        with np.load(self.path / "montecarlo.npz") as data:
+            fig = {k: data[k] for k in data.files}
+        s = load_scenario(self.path / "scenario.yaml")
+        figures = ensemble_figures(s, summary, fig, summary["reproduce_case"])
+        key = name if name.endswith(".png") else f"{name}.png"
+        return figures[key]
+
+
+class LinearizationResult:
+    """`dynprop linearization`: ``report`` (report.json's dict), ``verdict``,
+    ``markdown`` (report.md) and ``save(dir)`` (report.md, report.json, figures)."""
+
+    def __init__(self, report: dict, arrays: dict):
+        self.report, self._arrays = report, arrays
+
+    @property
+    def verdict(self) -> str:
+        return self.report["verdict"]
+
+    @property
+    def markdown(self) -> str:
+        from scenarios.linearization.report import render_markdown
+        return render_markdown(self.report)
+
+    def save(self, out: str | Path, force: bool = False) -> Path:
+        from scenarios.linearization.report import write_report
+        from scenarios.rundir import check_out_dir
+        out = Path(out)
+        check_out_dir(out, force)
+        with staged_run_dir(out, force=force) as stage:
+            write_report(stage, self.report, self._arrays)
+        return out
+
+    def __str__(self) -> str:
+        return self.verdict
+
+
+class TextReport:
+    """What `dynprop observability` / `covariance` print (``str()``), with the
+    numbers behind it where there are any (``data``)."""
+
+    def __init__(self, text: str, data=None):
+        self.text, self.data = text, data
+
+    def __str__(self) -> str:
+        return self.text
+
+    def __repr__(self) -> str:
+        return self.text
