@@ -20,13 +20,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from scenarios.loader import load_scenario  # noqa: E402
-from scenarios.runner import simulate  # noqa: E402
-from sim.control import Control  # noqa: E402
-from sim.environment import Environment  # noqa: E402
-from sim.frames import GeoOrbit  # noqa: E402
-from sim.spacecraft import goes_next  # noqa: E402
-from sim.truth import InitialState, TruthModel, simulate_truth  # noqa: E402
+from dynprop.scenarios.loader import load_scenario  # noqa: E402
+from dynprop.scenarios.runner import simulate  # noqa: E402
+from dynprop.sim.control import Control  # noqa: E402
+from dynprop.sim.environment import Environment  # noqa: E402
+from dynprop.sim.frames import GeoOrbit  # noqa: E402
+from dynprop.sim.spacecraft import goes_next  # noqa: E402
+from dynprop.sim.truth import InitialState, TruthModel, simulate_truth  # noqa: E402
 
 DAY = 86400.0
 EQUINOX = datetime(2026, 3, 20, 12, 0, 0, tzinfo=UTC)
@@ -117,7 +117,7 @@ def truth_day(model: TruthModel):
 def run_figures_2day_s() -> float:
     """The four `dynprop run` figures of the default two-day run, drawn and saved
     (two at a time, as `dynprop run` does), from its comparison.npz and telemetry."""
-    from scenarios.plotting import plot_run_figures
+    from dynprop.scenarios.plotting import plot_run_figures
     exe = str(Path(sys.executable).with_name("dynprop"))
     with tempfile.TemporaryDirectory() as tmp:
         run = Path(tmp) / "run"
@@ -129,8 +129,8 @@ def run_figures_2day_s() -> float:
 def discretize_ms() -> float:
     """Φ, Γ and Q_d of the paper's model at 0.512 s (Eqs. 15–23, 31–32), the best of
     200 calls: the filter is rebuilt from these for every run and Monte Carlo case."""
-    from estimator.transition import discretize
-    from scenarios.build import estimator_model
+    from dynprop.estimator.transition import discretize
+    from dynprop.scenarios.build import estimator_model
     params, noise = estimator_model(load_scenario("goes_next_equinox"))
     discretize(params, noise, 0.512)
     times = []
@@ -144,11 +144,11 @@ def discretize_ms() -> float:
 def ekf_over_filter() -> float:
     """ekf_s_per_day / filter_s_per_day, each the median of 7 one-day runs on the same
     synthetic day, taken in turn (issue 16's target: ≤ 4)."""
-    from estimator.ekf import EkfInputs, ekf_filter
-    from estimator.kalman import Measurements, kalman_filter
-    from estimator.transition import discretize
-    from scenarios.build import estimator_model
-    from scenarios.ekf_run import ekf_design
+    from dynprop.estimator.ekf import EkfInputs, ekf_filter
+    from dynprop.estimator.kalman import Measurements, kalman_filter
+    from dynprop.estimator.transition import discretize
+    from dynprop.scenarios.build import estimator_model
+    from dynprop.scenarios.ekf_run import ekf_design
     scenario = load_scenario("goes_next_equinox", ["duration_s=86400"])
     params, noise = estimator_model(scenario)
     disc = discretize(params, noise, 0.512)
@@ -202,9 +202,9 @@ def main() -> None:
     report("simulate_2day_wall_s", cli_wall_s("simulate", "goes_next_equinox"), "s")
 
     # Issue 4: the filter over one day, roll and h every step, yaw two thirds of it.
-    from estimator.kalman import Measurements, dense_filter, kalman_filter
-    from estimator.transition import discretize
-    from scenarios.build import estimator_model
+    from dynprop.estimator.kalman import Measurements, dense_filter, kalman_filter
+    from dynprop.estimator.transition import discretize
+    from dynprop.scenarios.build import estimator_model
     params, noise = estimator_model(scenario)
     disc = discretize(params, noise, 0.512)
     n = 168_750
@@ -218,8 +218,8 @@ def main() -> None:
                                            repeats=5), "s")
     # Issue 16: the extended Kalman filter on the same day, pitch measured like roll;
     # its target is a ratio to filter_s_per_day of the same bench run (≤ 4×).
-    from estimator.ekf import EkfInputs, ekf_filter
-    from scenarios.ekf_run import ekf_design
+    from dynprop.estimator.ekf import EkfInputs, ekf_filter
+    from dynprop.scenarios.ekf_run import ekf_design
     pm, wn, X0, P0e = ekf_design(scenario)
     ekf_in = EkfInputs(
         np.column_stack([meas.roll_rad, rng.normal(0, 1.8e-4, n), yaw, meas.h_Nms]),

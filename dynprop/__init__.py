@@ -11,7 +11,7 @@ the same files; docs/outputs.md describes every column and key.  Units are SI
 inside, degrees and rpm only where the column name says so (``roll_deg``).
 """
 
-from scenarios import __version__
+from dynprop.scenarios import __version__
 
 from .api import (
     ScenarioError,

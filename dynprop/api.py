@@ -8,8 +8,8 @@ import json
 import tempfile
 from pathlib import Path
 
-from scenarios.loader import ScenarioError
-from scenarios.schema import Scenario
+from dynprop.scenarios.loader import ScenarioError
+from dynprop.scenarios.schema import Scenario
 
 from .results import (
     LinearizationResult,
@@ -41,7 +41,7 @@ def load_scenario(name_or_path: str | Path, set: dict | None = None, **overrides
 
 
 def _load(source, items: list[str]) -> Scenario:
-    from scenarios.loader import load_scenario as load
+    from dynprop.scenarios.loader import load_scenario as load
     return load(source, items)
 
 
@@ -61,9 +61,9 @@ def simulate(scenario: Scenario | str) -> SimulationResult:
 
         sim = dynprop.simulate(s)
         sim.truth[["roll_deg", "yaw_deg"]].plot()"""
-    from scenarios.rundir import staged_run_dir
-    from scenarios.runner import simulate as sim
-    from scenarios.runner import write_simulation
+    from dynprop.scenarios.rundir import staged_run_dir
+    from dynprop.scenarios.runner import simulate as sim
+    from dynprop.scenarios.runner import write_simulation
     s = _scenario(scenario)
     owner, out = _temporary("simulate")
     result = sim(s)
@@ -79,8 +79,8 @@ def run(scenario: Scenario | str) -> RunResult:
         r = dynprop.run(s)
         r.summary["yaw_error_at_gap_end_deg"], r.errors()["yaw_deg"].abs().max()
         r.figure("errors"); r.save("runs/eq")"""
-    from scenarios.rundir import staged_run_dir
-    from scenarios.runs import run_to_directory
+    from dynprop.scenarios.rundir import staged_run_dir
+    from dynprop.scenarios.runs import run_to_directory
     s = _scenario(scenario)
     owner, out = _temporary("run")
     with staged_run_dir(out) as stage:
@@ -92,7 +92,7 @@ def open_run(path: str | Path):
     """A directory written by the CLI or by ``save``: a `run`/`estimate` directory
     as ``RunResult``, a Monte Carlo set as ``MonteCarloResult``, a `simulate` one as
     ``SimulationResult``.  The files are read in place."""
-    from scenarios.rundir import RunDirError
+    from dynprop.scenarios.rundir import RunDirError
     path = Path(path)
     if (path / "montecarlo.json").is_file():
         return MonteCarloResult(path)
@@ -111,7 +111,7 @@ def montecarlo(scenario: Scenario | str, runs: int = 20, workers: int | None = N
 
         mc = dynprop.montecarlo(s, runs=10)
         mc.summary["nees"]["mean_after_convergence"]; mc.figure("mc_nees")"""
-    from scenarios.montecarlo.runset import run_set
+    from dynprop.scenarios.montecarlo.runset import run_set
     s = _scenario(scenario)
     owner, out = _temporary("montecarlo")
     # The set's own scenario.yaml reruns case K wherever the set is saved.
@@ -124,7 +124,7 @@ def linearization(scenario: Scenario | str) -> LinearizationResult:
     """Which linearization assumption breaks first (`dynprop linearization`)::
 
         lin = dynprop.linearization(s); print(lin.verdict); lin.save("runs/lin")"""
-    from scenarios.linearization.report import build_report
+    from dynprop.scenarios.linearization.report import build_report
     s = _scenario(scenario)
     report, arrays = build_report(s, f"dynprop linearization {s.name} --out DIR")
     return LinearizationResult(report, arrays)
@@ -132,8 +132,8 @@ def linearization(scenario: Scenario | str) -> LinearizationResult:
 
 def observability(scenario: Scenario | str) -> TextReport:
     """Section 4's rank tables (`dynprop observability`)."""
-    from estimator.observability import format_rank_table
-    from scenarios.build import estimator_model
+    from dynprop.estimator.observability import format_rank_table
+    from dynprop.scenarios.build import estimator_model
     params, _ = estimator_model(_scenario(scenario))
     return TextReport(format_rank_table(params))
 
@@ -141,8 +141,8 @@ def observability(scenario: Scenario | str) -> TextReport:
 def covariance(scenario: Scenario | str) -> TextReport:
     """Section 6's steady-state yaw σ by every method against the paper's 0.040°
     (`dynprop covariance`); ``.data`` is the report's dict."""
-    from estimator.covariance import covariance_report, format_covariance_report
-    from scenarios.build import estimator_model, estimator_sensor_specs
+    from dynprop.estimator.covariance import covariance_report, format_covariance_report
+    from dynprop.scenarios.build import estimator_model, estimator_sensor_specs
     s = _scenario(scenario)
     params, noise = estimator_model(s)
     report = covariance_report(params, noise, estimator_sensor_specs(s))

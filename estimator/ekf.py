@@ -20,8 +20,7 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-
-from rollout.chunks import ChunkedRollout
+from dynprop.rollout.chunks import ChunkedRollout
 
 from . import ekf_model as m
 from .kalman import N_UT, FilterResult

@@ -23,8 +23,7 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-
-from eom.gyrostat import dcm_from_quat, euler312, quat_rate
+from dynprop.eom.gyrostat import dcm_from_quat, euler312, quat_rate
 
 NX, NE, NU, NZ = 12, 11, 5, 4
 Q, W, HW, NP, NC = slice(0, 4), slice(4, 7), 7, slice(8, 10), slice(10, 12)

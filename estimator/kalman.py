@@ -21,8 +21,7 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-
-from rollout.chunks import ChunkedRollout
+from dynprop.rollout.chunks import ChunkedRollout
 
 from .model import H_WHEEL, N_STATES, R, Y
 

@@ -14,10 +14,9 @@ from __future__ import annotations
 from datetime import timedelta
 
 import numpy as np
-
-from estimator.consistency import chi2_bounds, nees, nis
-from estimator.kalman import unpack
-from estimator.model import H_WHEEL, N_STATES, R, Y
+from dynprop.estimator.consistency import chi2_bounds, nees, nis
+from dynprop.estimator.kalman import unpack
+from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 
 from .decimate import output_rows
 from .outputs import NEES_STRIDE, RAD2DEG

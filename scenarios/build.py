@@ -5,11 +5,10 @@ from __future__ import annotations
 from datetime import datetime
 
 import numpy as np
-
-from estimator.model import ModelParams, ProcessNoise
-from sim import control, environment, ephemeris, sensors, spacecraft
-from sim.frames import GeoOrbit
-from sim.truth import InitialState
+from dynprop.estimator.model import ModelParams, ProcessNoise
+from dynprop.sim import control, environment, ephemeris, sensors, spacecraft
+from dynprop.sim.frames import GeoOrbit
+from dynprop.sim.truth import InitialState
 
 from .schema import Scenario, SunHead
 
@@ -107,7 +106,7 @@ def estimator_model(s: Scenario) -> tuple[ModelParams, ProcessNoise]:
 def estimator_sensor_specs(s: Scenario):
     """The sensor numbers the covariance analysis uses (Section 6), from the scenario;
     the yaw variance is the DSS's, the sensor that sees the Sun last before the gap."""
-    from estimator.covariance import SensorSpecs
+    from dynprop.estimator.covariance import SensorSpecs
     c, w = s.sensors, s.spacecraft.wheels
     return SensorSpecs(dt_s=s.sample_interval_s, tach_quantum_rpm=c.tachometer.quantum_rpm,
                        tach_noise_3sigma_rpm=c.tachometer.noise_3sigma_rpm,

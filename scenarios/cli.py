@@ -281,7 +281,7 @@ def _cmd_trim(args) -> int:
 
 
 def _cmd_observability(args) -> int:
-    from estimator.observability import format_rank_table
+    from dynprop.estimator.observability import format_rank_table
 
     from .build import estimator_model
     params, _ = estimator_model(load_with_overrides(args))
@@ -290,7 +290,7 @@ def _cmd_observability(args) -> int:
 
 
 def _cmd_covariance(args) -> int:
-    from estimator.covariance import covariance_report, format_covariance_report
+    from dynprop.estimator.covariance import covariance_report, format_covariance_report
 
     from .build import estimator_model, estimator_sensor_specs
     scenario = load_with_overrides(args)

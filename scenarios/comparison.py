@@ -26,9 +26,8 @@ display units: deg, deg/s, N m s, N m; written only when their inputs exist):
 from __future__ import annotations
 
 import numpy as np
-
-from estimator.consistency import nis
-from estimator.model import H_WHEEL, R, Y
+from dynprop.estimator.consistency import nis
+from dynprop.estimator.model import H_WHEEL, R, Y
 
 from .outputs import RAD2DEG, display_factors
 

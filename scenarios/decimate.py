@@ -22,8 +22,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
-
-from estimator.model import H_WHEEL, R, Y
+from dynprop.estimator.model import H_WHEEL, R, Y
 
 from .comparison import comparison_arrays
 from .outputs import NEES_STRIDE, display_factors

@@ -9,11 +9,10 @@ wheels' momentum H and its rate Ḣ.
 from __future__ import annotations
 
 import numpy as np
-
-from estimator import ekf_model as m
-from estimator import model as em
-from estimator.ekf import EkfInputs, EkfResult, ekf_filter, initial_state
-from estimator.preprocess import wheel_torque
+from dynprop.estimator import ekf_model as m
+from dynprop.estimator import model as em
+from dynprop.estimator.ekf import EkfInputs, EkfResult, ekf_filter, initial_state
+from dynprop.estimator.preprocess import wheel_torque
 
 from . import build
 from .pipeline import filter_inputs, initial_prior

@@ -1,7 +1,7 @@
 """The paper's filter against the extended Kalman filter on the same telemetry, as
 the attitude error grows (docs/validation.md §8):
 
-    python -m scenarios.ekf_study --workers 2
+    python -m dynprop.scenarios.ekf_study --workers 2
 
 Each case is the linearization report's sweep (``linearization.propagation.
 sweep_changes``): an initial error δ on roll, pitch and yaw, or initial roll,
@@ -19,9 +19,8 @@ import sys
 from multiprocessing import get_context
 
 import numpy as np
-
-from estimator.consistency import chi2_bounds
-from estimator.kalman import unpack
+from dynprop.estimator.consistency import chi2_bounds
+from dynprop.estimator.kalman import unpack
 
 from . import build
 from .ekf_run import run_ekf
@@ -95,7 +94,7 @@ def markdown(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m scenarios.ekf_study")
+    ap = argparse.ArgumentParser(prog="python -m dynprop.scenarios.ekf_study")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="also write the rows here")
     args = ap.parse_args(argv)

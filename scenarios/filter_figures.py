@@ -6,10 +6,9 @@ telemetry); the errors are against the same truth in the paper's coordinates."""
 from __future__ import annotations
 
 import numpy as np
-
-from estimator.consistency import chi2_bounds, nees, nis
-from estimator.kalman import unpack
-from estimator.model import H_WHEEL, N_STATES, R, Y
+from dynprop.estimator.consistency import chi2_bounds, nees, nis
+from dynprop.estimator.kalman import unpack
+from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 
 from .accumulate import Mean, Rms
 from .decimate import output_rows

@@ -73,7 +73,7 @@ _Loader.add_constructor("tag:yaml.org,2002:set", _no_set)
 
 
 def bundled_dir() -> Path:
-    return Path(str(resources.files("scenarios")))
+    return Path(str(resources.files(__package__)))
 
 
 def bundled_names() -> list[str]:

@@ -7,11 +7,10 @@ import json
 from pathlib import Path
 
 import numpy as np
-
-from estimator.consistency import chi2_bounds, fraction_inside, nees, nis
-from estimator.covariance import approx_yaw_variance
-from estimator.kalman import unpack
-from estimator.model import N_STATES, R, Y
+from dynprop.estimator.consistency import chi2_bounds, fraction_inside, nees, nis
+from dynprop.estimator.covariance import approx_yaw_variance
+from dynprop.estimator.kalman import unpack
+from dynprop.estimator.model import N_STATES, R, Y
 
 from . import __version__
 from .schema import Scenario

@@ -22,20 +22,19 @@ from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
-
-from estimator import model as em
-from estimator.kalman import (
+from dynprop.estimator import model as em
+from dynprop.estimator.kalman import (
     ExtraNoise,
     FilterResult,
     SmootherResult,
     kalman_filter,
     rts_smoother,
 )
-from estimator.preprocess import prepare
-from estimator.transition import discretize
-from rollout.chunks import ChunkedRollout
-from sim.frames import dcm_from_euler312
-from sim.telemetry import make_telemetry
+from dynprop.estimator.preprocess import prepare
+from dynprop.estimator.transition import discretize
+from dynprop.rollout.chunks import ChunkedRollout
+from dynprop.sim.frames import dcm_from_euler312
+from dynprop.sim.telemetry import make_telemetry
 
 from . import build
 from .runner import Simulation, simulate

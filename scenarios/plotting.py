@@ -15,17 +15,16 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-
-from estimator import model as em
-from estimator.consistency import chi2_bounds
-from estimator.covariance import PAPER_SIGMA_YAW_DEG
-from plots.consistency import plot_consistency
-from plots.errors import plot_errors, plot_estimates
-from plots.run_figures import TORQUE_NAMES, plot_torques
-from plots.season import plot_season
-from plots.telemetry import plot_telemetry_overview
-from plots.trim import plot_trim_loop
-from plots.truth import plot_truth
+from dynprop.estimator import model as em
+from dynprop.estimator.consistency import chi2_bounds
+from dynprop.estimator.covariance import PAPER_SIGMA_YAW_DEG
+from dynprop.plots.consistency import plot_consistency
+from dynprop.plots.errors import plot_errors, plot_estimates
+from dynprop.plots.run_figures import TORQUE_NAMES, plot_torques
+from dynprop.plots.season import plot_season
+from dynprop.plots.telemetry import plot_telemetry_overview
+from dynprop.plots.trim import plot_trim_loop
+from dynprop.plots.truth import plot_truth
 
 from .csvio import read_csv
 from .rundir import RunDirError

@@ -1,8 +1,8 @@
 """Render docs/scenario-reference.md from the schema, so the two cannot drift.
 
-    python -m scenarios.reference --out docs/scenario-reference.md   # or: make docs
-    python -m scenarios.reference --check docs/scenario-reference.md # exit 1 if stale
-    python -m scenarios.reference                                    # to stdout
+    python -m dynprop.scenarios.reference --out docs/scenario-reference.md   # or: make docs
+    python -m dynprop.scenarios.reference --check docs/scenario-reference.md # exit 1 if stale
+    python -m dynprop.scenarios.reference                                    # to stdout
 
 Everything in the document is read from the schema, not restated:
 
@@ -39,7 +39,7 @@ from .schema import Scenario
 HEADER = """# Scenario reference
 
 Generated from the schema (`scenarios/schema.py`, `scenarios/montecarlo/schema.py`) by
-`python -m scenarios.reference --out docs/scenario-reference.md` (`make docs`); do not edit.
+`python -m dynprop.scenarios.reference --out docs/scenario-reference.md` (`make docs`); do not edit.
 
 A scenario is a YAML mapping.
 {required}
@@ -339,7 +339,7 @@ def render() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m scenarios.reference",
+    parser = argparse.ArgumentParser(prog="python -m dynprop.scenarios.reference",
                                      description=__doc__.splitlines()[0])
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--out", type=Path, help="write the document here")
@@ -348,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
     text = render()
     if args.check:
         if not args.check.exists() or args.check.read_text() != text:
-            print(f"{args.check} is stale: regenerate with `python -m scenarios.reference "
+            print(f"{args.check} is stale: regenerate with `python -m dynprop.scenarios.reference "
                   f"--out {args.check}` (or `make docs`)", file=sys.stderr)
             return 1
         return 0

@@ -10,10 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from sim.sensors import SensorSuite
-from sim.telemetry import Telemetry, make_telemetry
-from sim.truth import TruthResult, simulate_truth
+from dynprop.sim.sensors import SensorSuite
+from dynprop.sim.telemetry import Telemetry, make_telemetry
+from dynprop.sim.truth import TruthResult, simulate_truth
 
 from . import build
 from .columns import telemetry_columns, truth_columns

@@ -6,9 +6,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
-from estimator.kalman import rts_smoother
-from estimator.transition import discretize
+from dynprop.estimator.kalman import rts_smoother
+from dynprop.estimator.transition import discretize
 
 from . import build
 from .comparison import comparison_arrays

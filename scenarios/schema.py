@@ -3,7 +3,7 @@
 Defaults are GOES-Next's from the paper, so a scenario file only lists what it
 changes.  Models are strict: unknown keys, wrong types, NaN and infinity are
 errors, and each error carries its key path.  ``docs/scenario-reference.md`` is
-generated from these definitions (``python -m scenarios.reference``).
+generated from these definitions (``python -m dynprop.scenarios.reference``).
 """
 
 from __future__ import annotations
@@ -12,13 +12,12 @@ import difflib
 from typing import Annotated, Literal
 
 import numpy as np
+from dynprop.sim import control as sim_control
+from dynprop.sim import environment as sim_env
+from dynprop.sim import ephemeris, sensors, spacecraft
+from dynprop.sim.frames import GeoOrbit
+from dynprop.sim.telemetry import MIN_SUN_SEPARATION_DEG
 from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
-
-from sim import control as sim_control
-from sim import environment as sim_env
-from sim import ephemeris, sensors, spacecraft
-from sim.frames import GeoOrbit
-from sim.telemetry import MIN_SUN_SEPARATION_DEG
 
 from .montecarlo.schema import MonteCarlo, check_dispersion
 

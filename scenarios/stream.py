@@ -28,15 +28,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
-from estimator.kalman import (
+from dynprop.estimator.kalman import (
     ExtraNoise,
     FilterResult,
     kalman_filter,
     rts_smoother,
 )
-from estimator.transition import discretize
-from sim.telemetry import make_telemetry
-from sim.truth import TruthStream
+from dynprop.estimator.transition import discretize
+from dynprop.sim.telemetry import make_telemetry
+from dynprop.sim.truth import TruthStream
 
 from . import build
 from .columns import telemetry_columns, truth_columns

@@ -16,14 +16,13 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-
-from estimator import model as em
-from estimator.kalman import FilterResult, kalman_filter, unpack
-from estimator.preprocess import yaw_momentum
-from estimator.transition import discretize
-from estimator.trim import KappaFit, Recommendation, equivalent_states, fit_kappa, recommend
-from sim import geomag
-from sim.truth import TruthStream
+from dynprop.estimator import model as em
+from dynprop.estimator.kalman import FilterResult, kalman_filter, unpack
+from dynprop.estimator.preprocess import yaw_momentum
+from dynprop.estimator.transition import discretize
+from dynprop.estimator.trim import KappaFit, Recommendation, equivalent_states, fit_kappa, recommend
+from dynprop.sim import geomag
+from dynprop.sim.truth import TruthStream
 
 from . import build
 from .pipeline import filter_inputs, initial_prior, telemetry_inputs

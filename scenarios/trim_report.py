@@ -215,7 +215,7 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
 def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = None,
              telemetry: Path | None = None, do_verify: bool = False) -> dict:
     """Everything `dynprop trim` does; returns the trim.json dictionary."""
-    from plots.trim import plot_trim
+    from dynprop.plots.trim import plot_trim
 
     from .plotting import save_figure
     from .rundir import staged_run_dir

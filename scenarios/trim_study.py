@@ -3,7 +3,7 @@ filter's covariance beside the spread of κ̂ − κ over a Monte Carlo of dispe
 cases (the scenario's ``montecarlo.dispersions``, drawn exactly as `dynprop
 montecarlo` draws case K).  Every batch starts at t = 0.
 
-    python -m scenarios.trim_study --cases 20 --workers 2 \\
+    python -m dynprop.scenarios.trim_study --cases 20 --workers 2 \\
         --figure docs/figures/trim_batch.png                 # docs/validation.md §7
 
 The analysis of each case knows what the ground knows (``trim.ASSUMED_KNOWN``):
@@ -141,7 +141,7 @@ def markdown(table: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m scenarios.trim_study", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m dynprop.scenarios.trim_study", description=__doc__)
     ap.add_argument("--cases", type=int, default=20)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="also write the table here")
@@ -150,7 +150,7 @@ def main(argv=None) -> int:
     table = study(args.cases, args.workers)
     print(markdown(table))
     if args.figure:
-        from plots.trim import plot_batch_study
+        from dynprop.plots.trim import plot_batch_study
 
         from .plotting import save_figure
         save_figure(plot_batch_study(table, BATCH_LABELS, PAPER_TRIMMED_NM), Path(args.figure))

@@ -13,8 +13,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
-
-from sim.frames import dcm_from_euler312
+from dynprop.sim.frames import dcm_from_euler312
 
 from . import build
 from .pipeline import EXTERNAL

@@ -14,10 +14,9 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
-
-from estimator import model as em
-from estimator.consistency import nees
-from estimator.kalman import ExtraNoise, kalman_filter, unpack
+from dynprop.estimator import model as em
+from dynprop.estimator.consistency import nees
+from dynprop.estimator.kalman import ExtraNoise, kalman_filter, unpack
 
 from .decimate import output_rows
 from .outputs import NEES_STRIDE

@@ -27,8 +27,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-
-from eom.gyrostat import euler312
+from dynprop.eom.gyrostat import euler312
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-
-from eom import gyrostat as dyn
+from dynprop.eom import gyrostat as dyn
 
 from .frames import GeoOrbit
 from .spacecraft import Spacecraft

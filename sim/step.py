@@ -23,8 +23,7 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-
-from eom import gyrostat as dyn
+from dynprop.eom import gyrostat as dyn
 
 from . import geomag
 from .control import Control, control_law, wheel_allocation

@@ -15,9 +15,8 @@ from datetime import datetime
 from functools import lru_cache
 
 import numpy as np
-
-from rollout.chunks import ChunkedRollout
-from rollout.compiled import requested_backend
+from dynprop.rollout.chunks import ChunkedRollout
+from dynprop.rollout.compiled import requested_backend
 
 from . import ephemeris
 from .control import Control

@@ -8,9 +8,42 @@ compiled backend was used, or bit identity with a compiled result) carry
 ``@pytest.mark.compiled_only`` and are skipped in that pass.
 """
 
+import importlib
+import importlib.abc
+import importlib.util
 import os
+import sys
 
 import pytest
+
+# The repository's folders install as dynprop.sim, dynprop.scenarios, ... (no generic
+# top-level names in a user's environment).  The tests keep their short imports
+# (``from scenarios.loader import ...``): each is the installed dynprop module itself,
+# never a second copy of it (which would make two ScenarioError classes, two caches).
+ALIASED = ("sim", "estimator", "scenarios", "plots", "rollout", "eom")
+
+
+class _DynpropAlias(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ALIASED:
+            return importlib.util.spec_from_loader(name, self)
+        return None
+
+    def __init__(self):
+        self.specs = {}
+
+    def create_module(self, spec):
+        module = importlib.import_module(f"dynprop.{spec.name}")
+        self.specs[spec.name] = module.__spec__
+        return module
+
+    def exec_module(self, module):
+        # The import system has just stamped the alias spec on the real module; give
+        # it back its own, so that __spec__.parent agrees with __package__.
+        module.__spec__ = self.specs.pop(module.__spec__.name)
+
+
+sys.meta_path.insert(0, _DynpropAlias())
 
 
 def pytest_collection_modifyitems(config, items):

@@ -11,10 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from estimator.consistency import chi2_bounds, fraction_inside, nees
-from estimator.kalman import unpack
-from estimator.model import N_STATES, R, Y
+from dynprop.estimator.consistency import chi2_bounds, fraction_inside, nees
+from dynprop.estimator.kalman import unpack
+from dynprop.estimator.model import N_STATES, R, Y
 
 from .. import build
 from ..ekf_run import run_ekf

@@ -19,10 +19,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-
-from sim.frames import GeoOrbit
-from sim.linearize import linearize_about_nominal
-from sim.spacecraft import Spacecraft
+from dynprop.sim.frames import GeoOrbit
+from dynprop.sim.linearize import linearize_about_nominal
+from dynprop.sim.spacecraft import Spacecraft
 
 # Jacobian columns (sim.linearize): state ψ φ θ ψ̇ φ̇ θ̇ h, inputs N_x N_y N_z Ḣ ḣ; rows ψ̈ φ̈ θ̈.
 PSI, PHI, THETA, PSI_D, PHI_D, THETA_D, H_COL = range(7)

@@ -24,11 +24,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from dynprop.estimator import model as em
+from dynprop.estimator.transition import discretize
+from dynprop.sim.linearize import linearize_about_nominal
 from scipy.linalg import expm
-
-from estimator import model as em
-from estimator.transition import discretize
-from sim.linearize import linearize_about_nominal
 
 from .. import build
 from ..loader import validate

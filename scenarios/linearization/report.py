@@ -10,9 +10,8 @@ import json
 from pathlib import Path
 
 import numpy as np
-
-from estimator.consistency import chi2_bounds
-from estimator.model import N_STATES
+from dynprop.estimator.consistency import chi2_bounds
+from dynprop.estimator.model import N_STATES
 
 from .. import __version__, build
 from ..schema import Scenario
@@ -231,8 +230,7 @@ def write_report(out: Path, report: dict, arrays: dict) -> list[Path]:
 
 def draw_figures(out: Path, report: dict, arrays: dict) -> list[Path]:
     import matplotlib.pyplot as plt
-
-    from plots import linearization as pl
+    from dynprop.plots import linearization as pl
     m = report["meta"]
     cap = f"{m['scenario']} · seed {m['seed']} · {m['command']}"
     c, sw, b = report["coefficients"], report["sweep"], report["budget"]

@@ -14,10 +14,9 @@ import time
 import traceback
 
 import numpy as np
-
-from estimator.consistency import nees
-from estimator.kalman import unpack
-from estimator.model import H_WHEEL, R, Y
+from dynprop.estimator.consistency import nees
+from dynprop.estimator.kalman import unpack
+from dynprop.estimator.model import H_WHEEL, R, Y
 
 from ..columns import telemetry_columns
 from ..outputs import display_factors, sun_gaps

@@ -13,8 +13,7 @@ import zlib
 from datetime import timedelta
 
 import numpy as np
-
-from sim.ephemeris import parse_epoch
+from dynprop.sim.ephemeris import parse_epoch
 
 from ..build import DISPERSION_STREAM
 from ..loader import ScenarioError, validate

@@ -22,7 +22,7 @@ from ..workers import worker_pool
 from . import SchedulerError
 from .case import failed, run_case
 
-WORKER_MODULE = "scenarios.montecarlo.case"
+WORKER_MODULE = __package__ + ".case"
 CONNECT_TIMEOUT_S = 20.0  # how long --scheduler may take to answer
 
 

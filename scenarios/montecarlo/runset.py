@@ -88,7 +88,7 @@ def caption(s: Scenario, summary: dict, command: str) -> str:
 
 def ensemble_figures(s: Scenario, summary: dict, fig: dict, command: str) -> dict:
     """The set's figures as matplotlib Figures, by file name (``FIGURES``)."""
-    from plots.montecarlo import plot_ensemble_errors, plot_ensemble_nees, plot_gap_end_yaw
+    from dynprop.plots.montecarlo import plot_ensemble_errors, plot_ensemble_nees, plot_gap_end_yaw
     text = caption(s, summary, command)
     conv = s.montecarlo.converged_after_h
     figures = (

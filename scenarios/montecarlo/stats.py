@@ -18,10 +18,9 @@ Statistics*, 3rd ed., Section 7.1), which is open above until N ≥ ln(0.025)/ln
 from __future__ import annotations
 
 import numpy as np
+from dynprop.estimator.consistency import chi2_bounds
+from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 from scipy import stats as sps
-
-from estimator.consistency import chi2_bounds
-from estimator.model import H_WHEEL, N_STATES, R, Y
 
 from .. import __version__
 from ..build import estimator_model

@@ -1,0 +1,59 @@
+"""The package as a user installs it (issue 17): a wheel that puts only the dynprop
+namespace into site-packages, so that neither another distribution's ``sim`` nor a
+user's own ``sim.py`` or ``plots.py`` beside their notebook can shadow it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import sysconfig
+import venv
+import zipfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+QUICKSTART = ("import dynprop; r = dynprop.run(dynprop.load_scenario('goes_next_equinox', "
+              "duration_s=3600)); print(r.summary['yaw_error_rms_deg']); print(dynprop.__file__)")
+
+
+def _run(args, cwd, **kw):
+    return subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=600, **kw)
+
+
+def test_the_wheel_installs_only_the_dynprop_namespace_and_resists_shadowing(tmp_path):
+    done = _run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", str(ROOT), "-w",
+                 str(tmp_path / "dist")], tmp_path)
+    assert done.returncode == 0, done.stderr
+    wheel = next((tmp_path / "dist").glob("dynprop-*.whl"))
+    tops = {n.split("/")[0] for n in zipfile.ZipFile(wheel).namelist()}
+    assert tops == {"dynprop", wheel.name.split("-py3")[0] + ".dist-info"}
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "dynprop/py.typed" in names and "dynprop/scenarios/goes_next_equinox.yaml" in names
+    assert any(n.endswith("dist-info/licenses/LICENSE") or n.endswith("dist-info/LICENSE")
+               for n in names)
+
+    # A fresh venv with the wheel; its dependencies from this environment's
+    # site-packages (a path, not a site dir: nothing of ours is installed through it).
+    env = tmp_path / "venv"
+    venv.create(env, with_pip=False)
+    py = env / "bin" / "python"
+    site = Path(_run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                     tmp_path).stdout.strip())
+    (site / "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    done = _run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q",
+                 "--no-deps", str(wheel)], tmp_path)
+    assert done.returncode == 0, done.stderr
+
+    # The user's folder has its own sim.py and plots.py, first on sys.path.
+    work = tmp_path / "notebook"
+    work.mkdir()
+    for name in ("sim.py", "plots.py"):
+        (work / name).write_text("raise RuntimeError('the user module was imported')\n")
+    done = _run([str(py), "-c", QUICKSTART], work)
+    assert done.returncode == 0, done.stderr
+    value, where = done.stdout.split()
+    assert float(value) > 0 and where.startswith(str(site))
+    done = _run([str(py), "-c", "import sim"], tmp_path)
+    assert done.returncode != 0 and "No module named 'sim'" in done.stderr
+    done = _run([str(py), "-c", "import dynprop.sim.truth, dynprop.estimator.kalman"], tmp_path)
+    assert done.returncode == 0, done.stderr
