@@ -19,7 +19,7 @@ import sys
 from multiprocessing import get_context
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds
+from dynprop.estimator.consistency import chi2_bounds, nees
 from dynprop.estimator.kalman import unpack
 
 from . import build
@@ -35,8 +35,7 @@ SKIP_S = 3600.0   # the wheel control's first-hour transient, shared by both fil
 
 
 def _nees(x, P_packed, truth, keep):
-    e = x[keep] - truth[keep]
-    return np.einsum("ni,ni->n", e, np.linalg.solve(unpack(P_packed[keep]), e[..., None])[..., 0])
+    return nees(x[keep], unpack(P_packed[keep]), truth[keep])
 
 
 def one_case(job) -> dict:

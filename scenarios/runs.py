@@ -108,7 +108,7 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
     summary = summarize(s, runs, t, present, nees_data)
     summary["filters"] = ["paper", *extra]
     for name, r in extra.items():
-        summary[name] = _filter_summary(name, r, runs.truth_model, t, summary)
+        summary[name] = _filter_summary(s, name, r, runs.truth_model, t, present)
     from .plotting import plot_run_figures
     plot_run_figures(stage)
     return summary
@@ -142,16 +142,15 @@ def _ekf_measured(s: Scenario, columns: dict, deg: float):
     return roll, columns["pitch_deg"] * deg, yaw, speeds, sigma, head
 
 
-def _filter_summary(name: str, result, truth_model, t_s, summary: dict) -> dict:
+def _filter_summary(s: Scenario, name: str, result, truth_model, t_s, present) -> dict:
     """summary.json's section of a filter besides the paper's, for a run of one
-    window (the Sun gaps are the paper summary's)."""
+    window (at the Sun gaps the paper's summary uses, ``outputs.sun_gaps``)."""
     from types import SimpleNamespace
 
     from .decimate import output_rows
     from .filter_figures import FilterFigures
-    from .outputs import NEES_STRIDE
-    dt = float(t_s[1] - t_s[0]) if len(t_s) > 1 else 1.0
-    gaps = [(round(a * 3600 / dt), round(b * 3600 / dt)) for a, b in summary["sun_gaps_h"]]
+    from .outputs import NEES_STRIDE, sun_gaps
+    gaps = sun_gaps(present, s.sample_interval_s, s.estimator.sun_gap_min_h)
     rec = {"start": 0, "t_s": t_s, "truth_model": truth_model, name: SimpleNamespace(
         x=result.x, sigma=result.sigma, innovations=result.innovations,
         innovation_var=result.innovation_var, backend=result.backend,
@@ -200,7 +199,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     summary = summarize(s, runs, t, present, nees_data)
     summary["filters"] = ["paper", *extra]
     for name, r in extra.items():
-        summary[name] = _filter_summary(name, r, truth_model, t, summary)
+        summary[name] = _filter_summary(s, name, r, truth_model, t, present)
     # One key set for every summary: `run`'s output keys, for a file filtered row by row.
     summary.update(output_interval_s=s.sample_interval_s, telemetry_written=None, daily=None)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s)}

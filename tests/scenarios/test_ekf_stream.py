@@ -10,22 +10,12 @@ import json
 import numpy as np
 import pytest
 
-from scenarios.loader import load_scenario
-from scenarios.streamrun import stream_to_directory
-
 from .test_outputs_doc import _spans, csv_columns, json_keys, undocumented
+from .test_stream import _run
 
 GAP_EPOCH = "epoch_utc=2026-03-20T22:00:00Z"   # the night Sun gap 3.25–11.1 h in
 FULL = ["duration_s=46800", GAP_EPOCH, "output.interval_s=0.512"]
 BOTH = "estimator.filters=[paper, ekf]"
-
-
-def _run(tmp_path_factory, name, overrides, window_samples=None, processes=1):
-    s = load_scenario("goes_next_equinox", overrides)
-    out = tmp_path_factory.mktemp(name)
-    summary = stream_to_directory(s, out, window_samples=window_samples, processes=processes,
-                                  progress=False)
-    return out, summary
 
 
 @pytest.fixture(scope="module")
