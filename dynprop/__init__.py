@@ -13,27 +13,31 @@ inside, degrees and rpm only where the column name says so (``roll_deg``).
 
 from dynprop.scenarios import __version__
 
-from .api import (
-    ScenarioError,
-    covariance,
-    linearization,
-    load_scenario,
-    montecarlo,
-    observability,
-    open_run,
-    run,
-    simulate,
-)
-from .results import (
-    LinearizationResult,
-    MonteCarloResult,
-    RunResult,
-    SimulationResult,
-    TextReport,
-)
+# The names load on first use (PEP 562), not on `import dynprop`: every
+# `dynprop.<package>` import, the command line's included, runs this file first,
+# and the facade's tables (pandas) and statistics would cost the CLI half a
+# second of start-up it never uses.
+_API = ("ScenarioError", "covariance", "linearization", "load_scenario", "montecarlo",
+        "observability", "open_run", "run", "simulate")
+_RESULTS = ("LinearizationResult", "MonteCarloResult", "RunResult", "SimulationResult",
+            "TextReport")
 
-__all__ = [
+__all__ = [  # noqa: F822 - defined by __getattr__ below
     "LinearizationResult", "MonteCarloResult", "RunResult", "ScenarioError",
     "SimulationResult", "TextReport", "__version__", "covariance", "linearization",
     "load_scenario", "montecarlo", "observability", "open_run", "run", "simulate",
 ]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        from . import api
+        return getattr(api, name)
+    if name in _RESULTS:
+        from . import results
+        return getattr(results, name)
+    raise AttributeError(f"module 'dynprop' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_API, *_RESULTS])

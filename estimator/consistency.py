@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
 
 
 def nees(x_hat: np.ndarray, P: np.ndarray, x_true: np.ndarray, states=None) -> np.ndarray:
@@ -27,7 +26,11 @@ def chi2_bounds(dof: int, n_runs: int = 1, confidence: float = 0.95) -> tuple[fl
     if not 0 < confidence < 1:
         raise ValueError("confidence must be in (0, 1)")
     alpha = 1.0 - confidence
-    lo, hi = stats.chi2.ppf([alpha / 2, 1 - alpha / 2], n_runs * dof)
+    # χ²(k)'s quantile is 2·P⁻¹(k/2, q), P the regularised lower incomplete gamma
+    # function: scipy.stats.chi2.ppf's own formula, without the 0.35 s import of
+    # scipy.stats.
+    from scipy.special import gammaincinv
+    lo, hi = 2.0 * gammaincinv(n_runs * dof / 2, np.array([alpha / 2, 1 - alpha / 2]))
     return float(lo / n_runs), float(hi / n_runs)
 
 

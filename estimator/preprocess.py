@@ -21,11 +21,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from .covariance import SensorSpecs, roll_variance, tach_variance, yaw_variance
 from .kalman import Measurements
 from .model import ModelParams, input_vector
+from .savgol import savgol_derivative
 
 PAPER_SENSORS = SensorSpecs()  # Sections 2.1 and 2.3
 
@@ -52,8 +52,7 @@ def wheel_torque(h_Nms: np.ndarray, dt_s: float, window_s: float = 20.0) -> np.n
     if n < 5:
         return np.zeros(n)
     window = min(window, n if n % 2 else n - 1)
-    return savgol_filter(np.asarray(h_Nms, dtype=float), window, min(2, window - 1), deriv=1,
-                         delta=dt_s, mode="interp")
+    return savgol_derivative(h_Nms, window, min(2, window - 1), dt_s)
 
 
 MIN_WINDOWS = 100  # bridges of a length measured on the file, for its mean square

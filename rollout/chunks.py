@@ -163,8 +163,11 @@ class ChunkedRollout:
                     if n < c:  # pad by repeating the last row: computed and discarded
                         blk[:n] = a[start:stop]
                         blk[n:] = a[stop - 1]
-                    else:
+                    elif a.flags.c_contiguous:
                         blk = a[start:stop]
+                    else:  # a strided view (the smoother's reversed history): copied
+                        # a chunk at a time, in cache, not the whole array up front
+                        np.copyto(blk, a[start:stop])
                     buf.set_arg(i, memoryview(blk.reshape(-1)))
                 full = n == c
                 x_out = states[start + 1:stop + 1] if full and states is not None \
@@ -184,4 +187,6 @@ class ChunkedRollout:
 
 
 def _as_rows(inputs: list[np.ndarray]) -> list[np.ndarray]:
-    return [np.ascontiguousarray(a, dtype=float).reshape(len(a), -1) for a in inputs]
+    """Each input as (N, k) float rows; a strided view stays a view (``_chunks``
+    copies it a chunk at a time)."""
+    return [np.asarray(a, dtype=float).reshape(len(a), -1) for a in inputs]
