@@ -12,11 +12,28 @@ RAD2DEG = 180.0 / np.pi
 RADPS2RPM = 60.0 / (2.0 * np.pi)
 
 
-def truth_columns(result, sun_visible: np.ndarray) -> dict[str, np.ndarray]:
+def truth_columns(result, sun_visible: np.ndarray, rows: np.ndarray | None = None
+                  ) -> dict[str, np.ndarray]:
     """``w{x,y,z}_radps`` is ω_BN in body axes (what a gyro reads).  ``sun_visible`` is
     1 when any Sun-sensor head has the Sun in its field of view (geometry and
     eclipse, not noise); ``shadow`` is the visible fraction of the solar disc.
-    Torques are ``<source>_{x,y,z}_Nm``, body axes, at each sample."""
+    Torques are ``<source>_{x,y,z}_Nm``, body axes, at each sample.  With ``rows``,
+    those samples only: the same values, the torques formed there alone
+    (``sim.truth.Torques.rows``)."""
+    cols = _state_columns(result, sun_visible)
+    if rows is None:
+        torques = result.torques
+    else:
+        cols = {k: v[rows] for k, v in cols.items()}
+        torques = result.torques.rows(rows) if hasattr(result.torques, "rows") \
+            else {k: v[rows] for k, v in result.torques.items()}
+    for name, torque in torques.items():
+        for k, axis in enumerate("xyz"):
+            cols[f"{name}_{axis}_Nm"] = torque[:, k]
+    return cols
+
+
+def _state_columns(result, sun_visible: np.ndarray) -> dict[str, np.ndarray]:
     cols = {
         "t_s": result.t_s,
         "yaw_deg": result.yaw_rad * RAD2DEG,
@@ -33,9 +50,6 @@ def truth_columns(result, sun_visible: np.ndarray) -> dict[str, np.ndarray]:
     cols["sun_visible"] = np.asarray(sun_visible, dtype=float)
     cols["eclipse"] = result.eclipse.astype(float)
     cols["shadow"] = result.shadow
-    for name, torque in result.torques.items():
-        for k, axis in enumerate("xyz"):
-            cols[f"{name}_{axis}_Nm"] = torque[:, k]
     return cols
 
 

@@ -33,7 +33,7 @@ from dynprop.estimator.kalman import (
 from dynprop.estimator.preprocess import prepare
 from dynprop.estimator.transition import discretize
 from dynprop.rollout.chunks import ChunkedRollout
-from dynprop.sim.frames import dcm_from_euler312
+from dynprop.sim.frames import rotate_312
 from dynprop.sim.telemetry import make_telemetry
 
 from . import build
@@ -276,11 +276,11 @@ def sense_twin(s: Scenario, truth, twin: np.ndarray, suite, rngs):
     with the generators ``rngs`` (the same seeds as the truth's: the same draws)."""
     k = build.yaw_factors(s)
     speeds = truth.wheel_speeds_radps + np.outer(twin[:, em.H_WHEEL] - truth.h_Nms, k / (k @ k))
-    c_br = dcm_from_euler312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad)
     twin_truth = SimpleNamespace(
         t_s=truth.t_s, roll_rad=twin[:, em.R], pitch_rad=truth.pitch_rad,
         wheel_speeds_radps=speeds, shadow=truth.shadow, sun_orbit_frame=truth.sun_orbit_frame,
-        sun_body=np.einsum("nij,nj->ni", c_br, truth.sun_orbit_frame))
+        sun_body=rotate_312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad,
+                            truth.sun_orbit_frame))
     return make_telemetry(twin_truth, suite, rngs, s.sensors.sun.min_sun_separation_deg)
 
 

@@ -6,13 +6,14 @@ This is where ``sim`` meets the scenario; the estimator joins in a later issue.
 from __future__ import annotations
 
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from dynprop.sim.sensors import SensorSuite
+from dynprop.sim.sensors import SensorSuite, draw_ahead
 from dynprop.sim.telemetry import Telemetry, make_telemetry
-from dynprop.sim.truth import TruthResult, simulate_truth
+from dynprop.sim.truth import TruthResult, TruthStream
 
 from . import build
 from .columns import telemetry_columns, truth_columns
@@ -38,12 +39,18 @@ def simulate(scenario: Scenario, run: int = 0, model=None) -> Simulation:
     ``build.streams(scenario.seed, run)``."""
     rngs = build.streams(scenario.seed, run)
     suite = build.build_sensors(scenario)
-    truth = simulate_truth(
-        build.build_spacecraft(scenario), build.orbit(scenario),
-        build.build_environment(scenario), build.build_control(scenario),
-        build.build_initial(scenario), build.epoch(scenario), scenario.duration_s,
-        scenario.sample_interval_s, rng=rngs["ripple"], model=model)
-    tel = make_telemetry(truth, suite, rngs, scenario.sensors.sun.min_sun_separation_deg)
+    spacecraft = build.build_spacecraft(scenario)
+    stream = TruthStream(
+        spacecraft, build.orbit(scenario), build.build_environment(scenario),
+        build.build_control(scenario), build.build_initial(scenario), build.epoch(scenario),
+        scenario.duration_s, scenario.sample_interval_s, rng=rngs["ripple"], model=model)
+    # The sensors' noise is drawn on the second core while the truth rolls out (the
+    # compiled rollout and numpy's generators both release the GIL).
+    with ThreadPoolExecutor(1) as pool:
+        drawn = pool.submit(draw_ahead, suite, rngs, stream.n_samples, spacecraft.n_wheels)
+        truth = stream.window(0, stream.n_samples)
+        tel = make_telemetry(truth, suite, drawn.result(),
+                             scenario.sensors.sun.min_sun_separation_deg)
     return Simulation(scenario, truth, tel, suite)
 
 

@@ -24,6 +24,7 @@ Stages are generators over window records (dicts), chained in ``windows_of``;
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -35,6 +36,7 @@ from dynprop.estimator.kalman import (
     rts_smoother,
 )
 from dynprop.estimator.transition import discretize
+from dynprop.sim.sensors import draw_ahead
 from dynprop.sim.telemetry import make_telemetry
 from dynprop.sim.truth import TruthStream
 
@@ -122,7 +124,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
     yield plan
     suite = build.build_sensors(s)
     rngs = build.streams(s.seed, run)
-    twin_rngs = build.streams(s.seed, run)   # the twin's noise draws equal the real ones
+    n_wheels = build.build_spacecraft(s).n_wheels
+    draws = ThreadPoolExecutor(1)
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
     mt = s.estimator.model_torques
@@ -151,15 +154,19 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
             current = None
             if index < len(plan.bounds):
                 a, b = plan.bounds[index]
+                # The sensors' draws are made on the second core while the truth rolls
+                # out, and read again by the twin's sensors (its generators would
+                # repeat them: the same seeds).
+                drawn = draws.submit(draw_ahead, suite, rngs, b - a, n_wheels)
                 truth = stream.window(a, b)
-                tel = make_telemetry(truth, suite, rngs, min_sep)
+                drawn = drawn.result()
+                tel = make_telemetry(truth, suite, drawn, min_sep)
                 tt = truth_torques(truth, mt, params.omega0_radps)
                 rows = output_rows(a, b, plan.stride) - a
                 tel_cols = telemetry_columns(tel, suite)
                 if loop is not None:   # may move the tab for the next window
                     loop.add(truth, tel_cols, index == len(plan.bounds) - 1)
-                unwritten.append((index, {k: v[rows] for k, v in
-                                          truth_columns(truth, tel.sun_visible).items()},
+                unwritten.append((index, truth_columns(truth, tel.sun_visible, rows),
                                   tel_cols))
                 real = {"index": index, "start": a, "stop": b, "t_s": truth.t_s,
                         "meas": telemetry_inputs(s, tel_cols),
@@ -170,6 +177,7 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                         "shadow": truth.shadow, "euler_rows": truth.euler_rad[rows]}
                 # What the twin needs of the truth, kept until the next window's first h.
                 current = {"index": index, "start": a, "stop": b, "t_s": truth.t_s, "tt": tt,
+                           "drawn": drawn,
                            "truth": SimpleNamespace(
                                t_s=truth.t_s, h_Nms=truth.h_Nms, shadow=truth.shadow,
                                wheel_speeds_radps=truth.wheel_speeds_radps,
@@ -180,9 +188,9 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
             if pending is not None:
                 # The twin's last step needs the next window's first h (its wheel torque).
                 h_next = None if current is None else current["truth"].h_Nms[0]
-                twin_x = twin_window(s, params, disc, pending, h_next, twin_x, twin_rngs, suite,
-                                     mt)
-                del pending["truth"], pending["tt"]
+                twin_x = twin_window(s, params, disc, pending, h_next, twin_x, pending["drawn"],
+                                     suite, mt)
+                del pending["truth"], pending["tt"], pending["drawn"]
                 for done in twin_filter.push(pending):
                     yield "twin", done
                     # Files once a window's records are all handed on, so the consumer
@@ -193,6 +201,7 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
             yield "twin", done
         write(len(plan.bounds))
     finally:
+        draws.shutdown()
         for f in files.values():
             f.close()
         if loop is not None:

@@ -153,6 +153,34 @@ class SunReadings:
     beta_rad: np.ndarray     # (N, n_heads)
 
 
+class DrawnNormals:
+    """A sensor's standard normals drawn ahead of its readings: ``standard_normal``
+    hands them back, so a sensor given this instead of its generator reads exactly
+    what the generator would have given it at that point."""
+
+    def __init__(self, values: np.ndarray):
+        self.values = values
+
+    def standard_normal(self, shape) -> np.ndarray:
+        if self.values.shape != tuple(shape):
+            raise ValueError(f"drawn {self.values.shape} normals, asked for {tuple(shape)}")
+        return self.values
+
+
+def draw_ahead(suite: SensorSuite, rngs, n: int, n_wheels: int) -> dict:
+    """What every sensor of ``suite`` draws for ``n`` samples, drawn now (for
+    ``sim.telemetry.make_telemetry`` in place of ``rngs``): a thread can draw while
+    the truth is simulated, and a second sensing of the same samples (the linear
+    twin's) reads the same draws without drawing them again.  Each generator's
+    draws are the ones the sensor would make, in the same order."""
+    if not suite.noise_enabled:
+        return dict(rngs)
+    shapes = {"earth": (n, 2), "tachometer": (n, n_wheels),
+              **{h.name: (n, 2) for h in suite.sun_heads}}
+    return {name: DrawnNormals(rngs[name].standard_normal(shape))
+            for name, shape in shapes.items()}
+
+
 def _noise(rng, shape, sigma, enabled: bool) -> np.ndarray:
     if not enabled:
         return np.zeros(shape)

@@ -10,6 +10,7 @@ per few thousand steps, none per step.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime
 from functools import lru_cache
@@ -26,6 +27,9 @@ from .spacecraft import Spacecraft
 from .step import build_step, input_layout, pack_params, split_aux
 
 DEFAULT_CHUNK = 4096
+# TruthResult.torques's sources, in truth.csv's column order.
+TORQUE_SOURCES = ("gravity_gradient", "solar", "magnetic", "magnetic_control", "wheel_control",
+                  "wheel_input", "wheel_ripple", "external")
 TAIL_CHUNK = 256  # a short run's or a long run's last steps, without 4096-step padding
 
 
@@ -73,7 +77,7 @@ class TruthResult:
     wheel_speeds_radps: np.ndarray
     h_Nms: np.ndarray
     H_Nms: np.ndarray
-    torques: dict[str, np.ndarray]
+    torques: Mapping[str, np.ndarray]
     wheel_command_Nm: np.ndarray
     torquer_dipole_Am2: np.ndarray
     sun_body: np.ndarray
@@ -377,6 +381,38 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
     return stream.window(0, stream.n_samples)
 
 
+class Torques(Mapping):
+    """``TruthResult.torques``: body torques by source, (N, 3) each.  The wheel
+    motors' reactions on the body (``_reaction``) are formed when first asked for,
+    since only the files read them, and ``rows`` forms them on chosen samples
+    alone: a run writing every 125th sample never builds the others."""
+
+    def __init__(self, ready: dict[str, np.ndarray], reactions: dict[str, np.ndarray],
+                 axes: np.ndarray, order: tuple[str, ...]):
+        self._ready, self._reactions, self._axes, self._order = \
+            dict(ready), dict(reactions), axes, order
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._ready:
+            if name not in self._reactions:
+                raise KeyError(name)
+            self._ready[name] = _reaction(self._reactions.pop(name), self._axes)
+        return self._ready[name]
+
+    def __iter__(self):
+        return iter(self._order)
+
+    def __len__(self) -> int:
+        return len(self._order)
+
+    def rows(self, idx: np.ndarray) -> dict[str, np.ndarray]:
+        """Every torque at the samples ``idx``: the rows of the whole arrays, bit for
+        bit (a reaction is a per-row sum)."""
+        return {name: self._ready[name][idx] if name in self._ready
+                else _reaction(self._reactions[name][idx], self._axes)
+                for name in self._order}
+
+
 def _reaction(motor_Nm: np.ndarray, axes: np.ndarray) -> np.ndarray:
     """Body torque −Σ_i u_i a_i of the wheel motor torques (N, n) on axes (n, 3).
     Summed wheel by wheel, not by a BLAS product: BLAS kernels treat the rows of a
@@ -393,16 +429,11 @@ def _result(t_s, states, aux, inputs, shadow, spacecraft, backend) -> TruthResul
     a = split_aux(aux, n)
     x = states[:-1]
     axes = spacecraft.wheel_axes
-    torques = {
-        "gravity_gradient": a["t_gg"],
-        "solar": a["t_solar"],
-        "magnetic": a["t_mag"],
-        "magnetic_control": a["t_mtq"],
-        "wheel_control": _reaction(a["u_cmd"], axes),
-        "wheel_input": _reaction(inputs["u_wheel"], axes),
-        "wheel_ripple": _reaction(inputs["ripple"], axes),
-        "external": inputs["n_ext"],
-    }
+    torques = Torques(
+        {"gravity_gradient": a["t_gg"], "solar": a["t_solar"], "magnetic": a["t_mag"],
+         "magnetic_control": a["t_mtq"], "external": inputs["n_ext"]},
+        {"wheel_control": a["u_cmd"], "wheel_input": inputs["u_wheel"],
+         "wheel_ripple": inputs["ripple"]}, axes, TORQUE_SOURCES)
     return TruthResult(
         t_s=t_s, q_br=x[:, 0:4], w_bn_radps=x[:, 4:7], w_br_radps=a["w_br"],
         wheel_speeds_radps=x[:, 7:], h_Nms=a["h"], H_Nms=a["H"], torques=torques,

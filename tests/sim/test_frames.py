@@ -649,3 +649,16 @@ def test_orbit_frame_angular_velocity_from_poisson_equation():
 def test_geo_orbit_rejects_bad_parameters(kwargs):
     with pytest.raises(ValueError):
         GeoOrbit(**kwargs)
+
+
+def test_rotate_312_is_the_dcm_applied():
+    """The twin's Sun in body axes, rotated an axis at a time, equals C_BR v from the
+    stacked matrices to round-off (a few ulps of |v|), at any angles."""
+    from sim.frames import dcm_from_euler312, rotate_312
+    rng = np.random.default_rng(4)
+    yaw, roll, pitch = rng.uniform(-np.pi, np.pi, (3, 5000))
+    v = rng.normal(size=(5000, 3))
+    ref = np.einsum("nij,nj->ni", dcm_from_euler312(yaw, roll, pitch), v)
+    got = rotate_312(yaw, roll, pitch, v)
+    np.testing.assert_allclose(got, ref, rtol=0,
+                               atol=16 * np.finfo(float).eps * np.abs(v).sum(axis=1).max())

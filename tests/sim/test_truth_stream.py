@@ -7,6 +7,7 @@ telemetry with the generators carried along."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from datetime import UTC, datetime
 
 import numpy as np
@@ -15,10 +16,10 @@ import pytest
 from sim.control import Control
 from sim.environment import Environment
 from sim.frames import GeoOrbit
-from sim.sensors import SensorSuite
+from sim.sensors import SensorSuite, draw_ahead
 from sim.spacecraft import goes_next
 from sim.telemetry import make_telemetry
-from sim.truth import InitialState, TruthResult, TruthStream
+from sim.truth import TORQUE_SOURCES, InitialState, TruthResult, TruthStream
 
 # 03:30 UTC on the equinox: local midnight at 75° W (the eclipse, ~70 min) falls
 # 1.5 h into the 3 h run.
@@ -51,7 +52,7 @@ def _equal_fields(a, b) -> list[str]:
     bad = []
     for f in dataclasses.fields(a):
         x, y = getattr(a, f.name), getattr(b, f.name)
-        if isinstance(x, dict):
+        if isinstance(x, Mapping):
             bad += [k for k in x if not np.array_equal(x[k], y[k])]
         elif isinstance(x, np.ndarray) and not np.array_equal(x, y, equal_nan=True):
             bad.append(f.name)
@@ -86,6 +87,36 @@ def test_telemetry_of_the_windows_is_the_whole_runs(whole_and_windows):
     one = make_telemetry(whole, suite, rngs())
     carried = rngs()
     pieces = [make_telemetry(p, suite, carried) for p in parts]
+    _assert_same_telemetry(one, pieces)
+    # Drawn ahead a window at a time (stream.producer, in a thread), and read a
+    # second time by another sensing of the same window (the linear twin's).
+    carried = rngs()
+    ahead = [draw_ahead(suite, carried, len(p.t_s), 2) for p in parts]
+    for _ in range(2):
+        _assert_same_telemetry(one, [make_telemetry(p, suite, d)
+                                     for p, d in zip(parts, ahead, strict=True)])
+
+
+def test_drawn_normals_must_match_the_sensor():
+    suite = SensorSuite()
+    drawn = draw_ahead(suite, {n: np.random.default_rng(0) for n in suite.stream_names()},
+                       10, 2)
+    with pytest.raises(ValueError, match="drawn"):
+        drawn["earth"].standard_normal((11, 2))
+
+
+def test_torques_on_chosen_rows_are_the_whole_arrays_rows():
+    """The wheel reactions are formed only when read (truth.csv's rows)."""
+    whole = _stream().window(0, 3000)
+    rows = np.arange(3, len(whole.t_s), 125)
+    picked = whole.torques.rows(rows)   # before anything formed the whole reactions
+    assert list(picked) == list(whole.torques) == list(TORQUE_SOURCES)
+    for name in whole.torques:
+        assert np.array_equal(picked[name], whole.torques[name][rows]), name
+    assert np.any(picked["wheel_control"] != 0) and np.any(picked["wheel_ripple"] != 0)
+
+
+def _assert_same_telemetry(one, pieces):
     for f in dataclasses.fields(one):
         x = getattr(one, f.name)
         if dataclasses.is_dataclass(x):
