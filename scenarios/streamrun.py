@@ -16,7 +16,7 @@ import time
 from multiprocessing import get_context
 from pathlib import Path
 
-from . import build
+from . import build, handoff
 from .accumulate import DailyFigures, RunFigures, window_nees
 from .csvio import CsvAppender, write_csv
 from .decimate import ComparisonRows, output_rows
@@ -32,11 +32,11 @@ QUEUE_ITEMS = 4   # two windows: a real and a twin record each
 LOG_EVERY_DAYS = 10
 
 
-def _child(queue, s, run, window_samples, out, telemetry_file) -> None:
+def _child(queue, s, run, window_samples, out, telemetry_file, shared) -> None:
     ignore_sigint()   # the parent handles Ctrl-C and terminates this process
     try:
         for item in producer(s, run, window_samples, out, telemetry_file):
-            queue.put(("item", item))
+            queue.put(("item", handoff.pack(item, shared)))
         queue.put(("done", None))
     except BaseException as exc:  # noqa: BLE001 - handed to the parent, which raises it
         try:
@@ -49,8 +49,9 @@ def producer_process(s: Scenario, run: int, window_samples, out, telemetry_file)
     """``stream.producer`` in a forked process; yields what it yields."""
     ctx = get_context("fork")
     queue = ctx.Queue(maxsize=QUEUE_ITEMS)
+    shared = handoff.HandoffDir()
     proc = ctx.Process(target=_child, args=(queue, s, run, window_samples, out,
-                                            telemetry_file), daemon=True)
+                                            telemetry_file, shared.path), daemon=True)
     with sigint_held():
         proc.start()
     try:
@@ -66,13 +67,14 @@ def producer_process(s: Scenario, run: int, window_samples, out, telemetry_file)
                 break
             if kind == "error":
                 raise item
-            yield item
+            yield handoff.unpack(*item)
         proc.join()
     finally:
         if proc.is_alive():
             proc.terminate()
             proc.join()
         queue.close()
+        shared.close()
 
 
 class Progress:
