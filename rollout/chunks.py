@@ -83,20 +83,28 @@ class ChunkedRollout:
         self.tail_function, _ = _chunk_function(step, self.tail_chunk, self.backend)
         self.n_aux = step.size1_out(1)
 
-    def run(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray
+    def run(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
+            out: tuple[np.ndarray, np.ndarray] | None = None, progress=None
             ) -> tuple[np.ndarray, np.ndarray]:
         """One step per row of the (N, k_j) ``inputs``.  Returns the carried states
-        (N+1, n_x) including x0, and the aux outputs (N, n_aux)."""
+        (N+1, n_x) including x0, and the aux outputs (N, n_aux): new arrays, or
+        ``out``'s (``allocate``).  ``progress(k)`` is called each time steps 0 … k−1
+        are in them (from this thread: another may read those rows meanwhile)."""
         arrays = _as_rows(inputs)
         n_steps = len(arrays[0]) if arrays else 0
-        states = np.empty((n_steps + 1, np.size(x0)))
+        states, aux = out if out is not None else self.allocate(n_steps, np.size(x0))
         states[0] = x0
-        aux = np.empty((n_steps, self.n_aux))
         for start, stop, x_out, a_out in self._chunks(x0, arrays, p, states, aux):
-            if x_out.base is not states:  # a short chunk ran in scratch
+            if not np.may_share_memory(x_out, states):  # a short chunk ran in scratch
                 states[start + 1:stop + 1] = x_out[:stop - start]
                 aux[start:stop] = a_out[:stop - start]
+            if progress is not None:
+                progress(stop)
         return states, aux
+
+    def allocate(self, n_steps: int, n_x: int) -> tuple[np.ndarray, np.ndarray]:
+        """Empty (states, aux) for ``run(..., out=)`` of ``n_steps`` steps."""
+        return np.empty((n_steps + 1, n_x)), np.empty((n_steps, self.n_aux))
 
     def run_final(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -109,7 +117,7 @@ class ChunkedRollout:
         aux = np.empty((n_steps, self.n_aux))
         x = np.array(x0, dtype=float).reshape(-1)
         for start, stop, x_out, a_out in self._chunks(x0, arrays, p, None, aux):
-            if a_out.base is not aux:  # a short chunk ran in scratch
+            if not np.may_share_memory(a_out, aux):  # a short chunk ran in scratch
                 aux[start:stop] = a_out[:stop - start]
             x = x_out[stop - start - 1].copy()
         return x, aux

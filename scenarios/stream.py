@@ -36,8 +36,8 @@ from dynprop.estimator.kalman import (
     rts_smoother,
 )
 from dynprop.estimator.transition import discretize
-from dynprop.sim.sensors import draw_ahead
-from dynprop.sim.telemetry import make_telemetry
+from dynprop.sim.sensors import draw_ahead, drawn_rows
+from dynprop.sim.telemetry import join_telemetry, make_telemetry
 from dynprop.sim.truth import TruthStream
 
 from . import build
@@ -154,13 +154,17 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
             current = None
             if index < len(plan.bounds):
                 a, b = plan.bounds[index]
-                # The sensors' draws are made on the second core while the truth rolls
-                # out, and read again by the twin's sensors (its generators would
-                # repeat them: the same seeds).
+                # The sensors' draws are made in a thread while the truth rolls out in
+                # another and this one senses it behind the rollout, a piece at a
+                # time; the twin's sensors read the same draws again (its generators
+                # would repeat them: the same seeds).
                 drawn = draws.submit(draw_ahead, suite, rngs, b - a, n_wheels)
-                truth = stream.window(a, b)
-                drawn = drawn.result()
-                tel = make_telemetry(truth, suite, drawn, min_sep)
+                truth, pieces = stream.window(a, b, sense=lambda rows, lo, hi, d=drawn:
+                                              make_telemetry(rows, suite,
+                                                             drawn_rows(d.result(), lo, hi),
+                                                             min_sep))
+                drawn, tel = drawn.result(), join_telemetry(pieces)
+                del pieces
                 tt = truth_torques(truth, mt, params.omega0_radps)
                 rows = output_rows(a, b, plan.stride) - a
                 tel_cols = telemetry_columns(tel, suite)

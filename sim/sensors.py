@@ -167,6 +167,12 @@ class DrawnNormals:
         return self.values
 
 
+def drawn_rows(drawn: dict, lo: int, hi: int) -> dict:
+    """Samples lo … hi−1 of ``draw_ahead``'s draws, for sensing a piece of them."""
+    return {name: DrawnNormals(d.values[lo:hi]) if isinstance(d, DrawnNormals) else d
+            for name, d in drawn.items()}
+
+
 def draw_ahead(suite: SensorSuite, rngs, n: int, n_wheels: int) -> dict:
     """What every sensor of ``suite`` draws for ``n`` samples, drawn now (for
     ``sim.telemetry.make_telemetry`` in place of ``rngs``): a thread can draw while

@@ -107,3 +107,16 @@ def make_telemetry(truth, suite: SensorSuite, rngs,
     yaw, sigma, head = derive_yaw(sun, suite.sun_heads, roll, pitch, truth.sun_orbit_frame,
                                   min_sun_separation_deg)
     return Telemetry(truth.t_s, roll, pitch, yaw, sigma, head, speeds, sun)
+
+
+def join_telemetry(pieces: list[Telemetry]) -> Telemetry:
+    """Consecutive pieces' telemetry as one (``TruthStream.window(sense=...)``)."""
+    if len(pieces) == 1:
+        return pieces[0]
+
+    def cat(name, of=lambda p: p):
+        return np.concatenate([getattr(of(p), name) for p in pieces])
+    sun = SunReadings(*(cat(f, lambda p: p.sun) for f in ("visible", "alpha_rad", "beta_rad")))
+    return Telemetry(*(cat(f) for f in ("t_s", "roll_rad", "pitch_rad", "yaw_rad",
+                                         "yaw_sigma_rad", "yaw_head", "wheel_speeds_radps")),
+                     sun)

@@ -10,7 +10,9 @@ per few thousand steps, none per step.
 from __future__ import annotations
 
 import dataclasses
+import queue
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime
 from functools import lru_cache
@@ -31,6 +33,7 @@ DEFAULT_CHUNK = 4096
 TORQUE_SOURCES = ("gravity_gradient", "solar", "magnetic", "magnetic_control", "wheel_control",
                   "wheel_input", "wheel_ripple", "external")
 TAIL_CHUNK = 256  # a short run's or a long run's last steps, without 4096-step padding
+SENSE_PIECE = 4 * DEFAULT_CHUNK   # samples per sensing call while the rollout runs
 
 
 @dataclass(frozen=True)
@@ -102,6 +105,18 @@ class TruthResult:
     @property
     def eclipse(self) -> np.ndarray:
         return self.shadow < 1.0
+
+    def rows(self, lo: int, hi: int) -> TruthResult:
+        """Samples lo … hi−1 of this window, as views (``final_state`` is the state
+        after them only for the window's last piece)."""
+        cut = slice(lo, hi)
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        for name, v in fields.items():
+            if isinstance(v, np.ndarray) and name != "final_state":
+                fields[name] = v[cut]
+        fields["torques"] = self.torques.slice(lo, hi) if isinstance(self.torques, Torques) \
+            else {k: v[cut] for k, v in self.torques.items()}
+        return TruthResult(**fields)
 
 
 class TruthModel:
@@ -334,21 +349,76 @@ class TruthStream:
         inputs, _ = self._inputs(a, b, t_s, np.zeros((b - a, self.spacecraft.n_wheels)))
         return t_s, inputs["sun_r"], inputs["sun_scale"]
 
-    def window(self, a: int, b: int) -> TruthResult:
-        """The truth at samples a … b−1 (the next window starts at b)."""
+    def window(self, a: int, b: int, sense=None, piece: int = SENSE_PIECE):
+        """The truth at samples a … b−1 (the next window starts at b).
+
+        With ``sense``, returns ``(truth, [sense(rows, lo, hi) …])`` instead, on both
+        cores: this thread forms the step inputs a piece of ``piece`` samples at a
+        time and hands each to a second thread, which rolls it out, then calls
+        ``sense`` on the truth of each piece (``TruthResult.rows``; samples
+        a+lo … a+hi−1) as soon as it is rolled out.  The truth is the same either
+        way, as every window's is (the class doc); a sensor model that continues
+        across calls (``sim.telemetry``'s, its generators carried) gives the whole
+        window's readings piece by piece."""
         if a != self.next_start or not a < b <= self.n_samples:
             raise ValueError(f"windows must be contiguous and within the run: asked "
                              f"[{a}, {b}), next is {self.next_start} of {self.n_samples}")
-        n_wheels = self.spacecraft.n_wheels
+        n, n_wheels = b - a, self.spacecraft.n_wheels
         t_s = self._t(np.arange(a, b))
         if self.sigma > 0:
-            ripple = self.sigma * self.rng.standard_normal((b - a, n_wheels))
+            ripple = self.sigma * self.rng.standard_normal((n, n_wheels))
         else:
-            ripple = np.zeros((b - a, n_wheels))
-        inputs, shadow = self._inputs(a, b, t_s, ripple)
-        # One step per output sample: the last step's end state is the next window's
-        # first, kept as final_state.
-        states, aux = self.model.rollout(self.x, inputs, self.p)
+            ripple = np.zeros((n, n_wheels))
+        engine = self.model.rollout_engine
+        states, aux = engine.allocate(n, len(self.x))
+        if sense is None:
+            inputs, shadow = self._inputs(a, b, t_s, ripple)
+            engine.run(self.x, [inputs[name] for name, _ in input_layout(n_wheels)], self.p,
+                       out=(states, aux))
+            return self._finish(a, t_s, states, aux, inputs, shadow)
+        inputs: dict[str, np.ndarray] = {}
+        shadow = np.empty(n)
+        bounds = [(lo, min(lo + piece, n)) for lo in range(0, n, piece)]
+        todo: queue.SimpleQueue = queue.SimpleQueue()
+        done: queue.SimpleQueue = queue.SimpleQueue()
+
+        def roll() -> None:
+            x = self.x
+            try:
+                for lo, hi in iter(todo.get, None):
+                    engine.run(x, [inputs[name][lo:hi] for name, _ in input_layout(n_wheels)],
+                               self.p, out=(states[lo:hi + 1], aux[lo:hi]))
+                    x = states[hi]
+                    if not np.all(np.isfinite(x)):
+                        states[hi + 1:] = np.nan    # _finish says where it went
+                        break
+                    done.put(hi)
+            finally:
+                done.put(None)
+        sensed = []
+        with ThreadPoolExecutor(1) as pool:
+            rolling = pool.submit(roll)
+            try:
+                for lo, hi in bounds:
+                    part, shadow[lo:hi] = self._inputs(a + lo, a + hi, t_s[lo:hi],
+                                                       ripple[lo:hi])
+                    for name, v in part.items():
+                        if name not in inputs:
+                            inputs[name] = np.empty((n, *v.shape[1:]))
+                        inputs[name][lo:hi] = v
+                    todo.put((lo, hi))
+            finally:
+                todo.put(None)
+            result = _result(t_s, states, aux, inputs, shadow, self.spacecraft,
+                             self.model.backend)
+            for lo, hi in bounds:
+                if done.get() is None:
+                    break
+                sensed.append(sense(result.rows(lo, hi), lo, hi))
+            rolling.result()
+        return self._finish(a, t_s, states, aux, inputs, shadow), sensed
+
+    def _finish(self, a, t_s, states, aux, inputs, shadow) -> TruthResult:
         # NaN never turns finite again in the state update, so the last state tells;
         # only a failed run pays for finding where it went.
         if not np.all(np.isfinite(states[-1])):
@@ -357,7 +427,7 @@ class TruthStream:
                                      f"{(a + k) * self.dt_s:.1f} s: the closed loop is "
                                      "unstable for these gains and this step")
         self.x = states[-1].copy()
-        self.next_start = b
+        self.next_start = a + len(t_s)
         return _result(t_s, states, aux, inputs, shadow, self.spacecraft, self.model.backend)
 
 
@@ -404,6 +474,13 @@ class Torques(Mapping):
 
     def __len__(self) -> int:
         return len(self._order)
+
+    def slice(self, lo: int, hi: int) -> Torques:
+        """Samples lo … hi−1, still formed only when read."""
+        cut = slice(lo, hi)
+        return Torques({k: v[cut] for k, v in self._ready.items()},
+                       {k: v[cut] for k, v in self._reactions.items()}, self._axes,
+                       self._order)
 
     def rows(self, idx: np.ndarray) -> dict[str, np.ndarray]:
         """Every torque at the samples ``idx``: the rows of the whole arrays, bit for

@@ -18,7 +18,7 @@ from sim.environment import Environment
 from sim.frames import GeoOrbit
 from sim.sensors import SensorSuite, draw_ahead
 from sim.spacecraft import goes_next
-from sim.telemetry import make_telemetry
+from sim.telemetry import join_telemetry, make_telemetry
 from sim.truth import TORQUE_SOURCES, InitialState, TruthResult, TruthStream
 
 # 03:30 UTC on the equinox: local midnight at 75° W (the eclipse, ~70 min) falls
@@ -135,3 +135,56 @@ def test_windows_must_be_contiguous():
         stream.window(11, 20)
     with pytest.raises(ValueError, match="contiguous"):
         stream.window(10, stream.n_samples + 1)
+
+
+def test_sensing_behind_the_rollout_gives_the_whole_runs_truth_and_telemetry(whole_and_windows):
+    """``window(sense=...)``: inputs formed a piece at a time, rolled out in a second
+    thread, each piece sensed as it is done; pieces of 1063 samples (not a multiple
+    of the chunk) cross the eclipse and the Sun-node and shadow-grid boundaries."""
+    whole, _ = whole_and_windows
+    suite = SensorSuite()
+
+    def rngs():
+        return {name: np.random.default_rng(k) for k, name in enumerate(suite.stream_names())}
+    carried = rngs()
+    stream = _stream()
+    spans = []
+
+    def sense(rows, lo, hi):
+        spans.append((lo, hi))
+        assert np.array_equal(rows.t_s, whole.t_s[lo:hi])
+        return make_telemetry(rows, suite, carried)
+    truth, pieces = stream.window(0, stream.n_samples, sense=sense, piece=1063)
+    assert _equal_fields(whole, truth) == []
+    assert spans[0] == (0, 1063) and spans[-1][1] == stream.n_samples
+    one = make_telemetry(whole, suite, rngs())
+    _assert_same_telemetry(one, pieces)
+    _assert_same_telemetry(one, [join_telemetry(pieces)])
+    assert stream.next_start == stream.n_samples
+
+
+def test_an_unstable_loop_stops_the_sensing_and_says_when():
+    """Positive feedback on h diverges at 12.8 s: the pieces before it are sensed,
+    none after, and the error names the same time as without sensing."""
+    def stream():
+        return TruthStream(goes_next(), GeoOrbit(), Environment(),
+                           Control(yaw_momentum_gain_per_s=5.0), InitialState(yaw_rad=1e-3),
+                           EPOCH, 3600.0, rng=np.random.default_rng(1))
+    with pytest.raises(FloatingPointError) as plain:
+        stream().window(0, 7032)
+    seen = []
+    with pytest.raises(FloatingPointError) as piecewise:
+        stream().window(0, 7032, sense=lambda rows, lo, hi: seen.append(
+            np.all(np.isfinite(rows.q_br)) and np.all(np.isfinite(rows.w_bn_radps))), piece=10)
+    assert "non-finite at t = 12.8 s" in str(plain.value)
+    assert str(piecewise.value) == str(plain.value)
+    assert len(seen) == 2 and all(seen)   # samples 0-19 sensed, nothing non-finite
+
+
+def test_an_error_in_the_sensing_comes_out():
+    stream = _stream()
+
+    def sense(rows, lo, hi):
+        raise RuntimeError("sensor model broke")
+    with pytest.raises(RuntimeError, match="sensor model broke"):
+        stream.window(0, 5000, sense=sense, piece=1000)
