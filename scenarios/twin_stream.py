@@ -87,8 +87,13 @@ def lighten_twin(rec: dict) -> None:
     lin = rec["linear"]
     k = idx - a
     rec["nees_linear"] = nees(lin.x[k], unpack(lin.P_packed[k]), rec["twin_model"][k])
-    rec["linear"] = SimpleNamespace(x=lin.x, innovations=lin.innovations,
-                                    innovation_var=lin.innovation_var, backend=lin.backend)
+    # Contiguous copies (not views of the filter's 60-column output): the record
+    # crosses to the consumer (``handoff``), which sends contiguous arrays by file
+    # and would pickle views through the pipe.
+    rec["linear"] = SimpleNamespace(x=np.ascontiguousarray(lin.x),
+                                    innovations=np.ascontiguousarray(lin.innovations),
+                                    innovation_var=np.ascontiguousarray(lin.innovation_var),
+                                    backend=lin.backend)
     rec.pop("twin_meas", None)
     rec.pop("linear_in", None)
 
