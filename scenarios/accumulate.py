@@ -144,7 +144,8 @@ class RunFigures:
             self.rms["yaw"].add(err[:, Y])
             self.rms["roll"].add(err[:, R])
             self.rms["h"].add(err[:, H_WHEEL])
-            ratio = (err / np.maximum(sig, 1e-300))[nees_idx - a] ** 2
+            k = nees_idx - a
+            ratio = (err[k] / np.maximum(sig[k], 1e-300)) ** 2
             self.per_state = self.per_state + np.sum(ratio, axis=0)
             self.per_state_n += len(ratio)
             self._nees("real", nees_real)

@@ -74,7 +74,10 @@ class ComparisonRows:
                 m.flush()
                 self.maps[key] = True
 
-    def add(self, rec: dict, nees_idx, nees_real, nees_lin, extra=()) -> None:
+    def add(self, rec: dict, nees_idx, nees_real, nees_lin, extra=(), err=None,
+            err_lin=None) -> None:
+        """One window's rows; ``err`` and ``err_lin`` (x̂ − truth of the real filter and
+        of the twin's) when the caller has them already."""
         a = rec["start"]
         n = len(rec["t_s"])
         rows = output_rows(a, a + n, self.stride)
@@ -101,32 +104,43 @@ class ComparisonRows:
             if lo is not None:
                 self._map(key, v.shape[1:], v.dtype)[lo:lo + len(rows)] = v
         if self.stride > 1:
-            self._envelopes(rec, a, n, nees_idx, nees_real, nees_lin)
+            self._envelopes(rec, a, n, nees_idx, nees_real, nees_lin, err, err_lin)
         self._release()
 
-    def _envelopes(self, rec, a, n, nees_idx, nees_real, nees_lin) -> None:
+    def _envelopes(self, rec, a, n, nees_idx, nees_real, nees_lin, err=None,
+                   err_lin=None) -> None:
+        # Rounding keeps order, so the least of f·v over an interval is f times the
+        # least of v when f > 0 (its greatest when f < 0: the rates' factor has
+        # ω_n's sign), the same double.  So each series is scaled after its
+        # reduction, on the rows kept, not before.
         f = display_factors(rec["params"].omega_n_radps)
-        err = rec["real"].x - rec["truth_model"]
-        series = {"err_real": (np.arange(a, a + n), err * f)}
+        samples = np.arange(a, a + n)
+        if err is None:
+            err = rec["real"].x - rec["truth_model"]
+        series = {"err_real": (samples, err, f)}
         if rec.get("linear") is not None:
-            err_lin = rec["linear"].x - rec["twin_model"]
-            series["err_linear"] = (series["err_real"][0], err_lin * f)
-            series["err_real_minus_linear"] = (series["err_real"][0],
-                                               (err - err_lin)[:, DIFF_COLS] * f[DIFF_COLS])
-            series["nees_linear"] = (nees_idx, nees_lin)
+            if err_lin is None:
+                err_lin = rec["linear"].x - rec["twin_model"]
+            series["err_linear"] = (samples, err_lin, f)
+            series["err_real_minus_linear"] = (samples, (err - err_lin)[:, DIFF_COLS],
+                                               f[DIFF_COLS])
+            series["nees_linear"] = (nees_idx, nees_lin, None)
         if rec.get("smoothed") is not None:
-            series["err_smoothed"] = (series["err_real"][0],
-                                      (rec["smoothed"].x - rec["truth_model"]) * f)
-        series["nees_real"] = (nees_idx, nees_real)
-        for key, (idx, v) in series.items():
+            series["err_smoothed"] = (samples, rec["smoothed"].x - rec["truth_model"], f)
+        series["nees_real"] = (nees_idx, nees_real, None)
+        for key, (idx, v, scale) in series.items():
             if len(idx) == 0:
                 continue
             ids = idx // self.stride
             starts = np.r_[0, np.flatnonzero(np.diff(ids)) + 1]
             rows = ids[starts]
-            for suffix, op in (("_min", np.fmin), ("_max", np.fmax)):
+            least, most = (op.reduceat(v, starts, axis=0) for op in (np.fmin, np.fmax))
+            if scale is not None:
+                least, most = (np.where(scale > 0, least, most) * scale,
+                               np.where(scale > 0, most, least) * scale)
+            for suffix, op, red in (("_min", np.fmin, least), ("_max", np.fmax, most)):
                 m = self._map(key + suffix, v.shape[1:], np.float32)
-                red = op.reduceat(v, starts, axis=0).astype(np.float32)
+                red = red.astype(np.float32)
                 # A row whose interval began in the previous window keeps its part.
                 red[0] = op(red[0], m[rows[0]])
                 m[rows] = red

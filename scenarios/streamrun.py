@@ -145,7 +145,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
             nees_idx, nees_real, nees_lin = window_nees(rec)
             closed = figures.add(rec, err, err_lin, nees_idx, nees_real, nees_lin)
             daily.add(rec, err, err_lin, nees_idx, nees_real, closed)
-            comparison.add(rec, nees_idx, nees_real, nees_lin, tuple(extra))
+            comparison.add(rec, nees_idx, nees_real, nees_lin, tuple(extra), err, err_lin)
             k = output_rows(rec["start"], rec["stop"], plan.stride) - rec["start"]
             estimate.append(estimate_columns(rec["t_s"][k], rec["real"].x[k],
                                              rec["real"].sigma[k], params.omega_n_radps))
