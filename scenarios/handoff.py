@@ -10,8 +10,8 @@ file, unlinks it and unpickles onto the mapping: its arrays are the file's pages
 not copies, and the memory returns when the last of them is dropped.
 
 The directory is the parent's (``HandoffDir``): whatever an interrupted run leaves
-in it goes with it.  Without a shared-memory file system (``/dev/shm``) the
-buffers go in band, through the queue, as before.
+in it goes with it.  Without a shared-memory file system (``/dev/shm``), or when it
+has no room for a record, the record goes in band, through the queue, as before.
 """
 
 from __future__ import annotations
@@ -34,7 +34,8 @@ class HandoffDir:
 
     def __init__(self):
         self.path = None
-        if SHM_ROOT.is_dir() and os.access(SHM_ROOT, os.W_OK):
+        if SHM_ROOT.is_dir() and os.access(SHM_ROOT, os.W_OK) \
+                and hasattr(os, "posix_fallocate"):
             remove_stale(SHM_ROOT)
             self.path = Path(tempfile.mkdtemp(prefix=f"dynprop-{os.getpid()}-", dir=SHM_ROOT))
 
@@ -73,7 +74,14 @@ def pack(obj, directory: Path | None) -> tuple:
         return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL), None, ()
     fd, name = tempfile.mkstemp(dir=directory)
     try:
-        os.ftruncate(fd, sum(sizes))
+        # Reserved before it is written: a full /dev/shm (a container's is often
+        # 64 MB) refuses here, where a write into a mapping would kill the process.
+        os.posix_fallocate(fd, 0, sum(sizes))
+    except OSError:
+        os.close(fd)
+        os.unlink(name)
+        return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL), None, ()
+    try:
         with mmap.mmap(fd, sum(sizes)) as m:
             offset = 0
             for raw, size in zip(raws, sizes, strict=True):

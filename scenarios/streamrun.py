@@ -2,9 +2,10 @@
 
 The producer (truth, telemetry, the linear twin and its filter; it also writes
 truth.csv and telemetry.csv) runs in a second process, joined to this one by a
-queue of at most ``QUEUE_ITEMS`` records, while this one runs the real filter and
-the smoother, accumulates the summary (``accumulate``) and writes estimate.csv
-and comparison.npz (``decimate``) at the output cadence.  Memory holds a few windows, whatever the
+queue of at most ``QUEUE_ITEMS`` records (their arrays go by shared-memory file,
+``handoff``), while this one runs the real filter and the smoother, accumulates
+the summary (``accumulate``) and writes estimate.csv and comparison.npz
+(``decimate``) at the output cadence.  Memory holds a few windows, whatever the
 duration.  Progress: a bar of simulated days on a terminal, otherwise a line every
 ``LOG_EVERY_DAYS`` days, for runs longer than one window.
 """

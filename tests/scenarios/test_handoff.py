@@ -64,3 +64,15 @@ def test_a_killed_runs_directory_is_removed_by_the_next(tmp_path):
     other.mkdir()
     assert handoff.remove_stale(tmp_path) == [left]
     assert not left.exists() and alive.exists() and other.exists()
+
+
+def test_no_room_in_shared_memory_sends_the_record_in_band(shared, monkeypatch):
+    """A full /dev/shm (posix_fallocate: ENOSPC) must not kill the producer with a
+    bus error on writing the mapping: the record goes through the pipe instead."""
+    def full(fd, offset, length):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(handoff.os, "posix_fallocate", full)
+    rec = {"x": np.arange(100_000.0)}
+    data, name, sizes = handoff.pack(rec, shared.path)
+    assert name is None and list(shared.path.iterdir()) == []
+    assert np.array_equal(handoff.unpack(data, name, sizes)["x"], rec["x"])
