@@ -82,11 +82,14 @@ def pack(obj, directory: Path | None) -> tuple:
         os.unlink(name)
         return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL), None, ()
     try:
-        with mmap.mmap(fd, sum(sizes)) as m:
-            offset = 0
-            for raw, size in zip(raws, sizes, strict=True):
-                m[offset:offset + size] = raw
-                offset += size
+        # Written by the kernel from the arrays' own memory: no mapping here to
+        # fault in page by page.
+        offset = 0
+        for raw in raws:
+            view = raw.cast("B")
+            while view:
+                done = os.pwrite(fd, view, offset)
+                view, offset = view[done:], offset + done
     finally:
         os.close(fd)
     return data, name, sizes
@@ -99,7 +102,9 @@ def unpack(data: bytes, name: str | None, sizes: tuple[int, ...]):
         return pickle.loads(data)
     fd = os.open(name, os.O_RDWR)
     try:
-        m = mmap.mmap(fd, sum(sizes))
+        # MAP_POPULATE: the pages are mapped in one call, not faulted in one by one
+        # as the consumer first reads them (a fault costs microseconds on a VM).
+        m = mmap.mmap(fd, sum(sizes), flags=mmap.MAP_SHARED | getattr(mmap, "MAP_POPULATE", 0))
     finally:
         os.close(fd)
         os.unlink(name)
