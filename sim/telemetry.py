@@ -53,10 +53,10 @@ def select_head(sun: SunReadings, heads) -> np.ndarray:
     n, k = sun.visible.shape
     rank = np.full((n, k), np.inf)
     for j, head in enumerate(heads):
-        off = np.hypot(sun.alpha_rad[:, j], sun.beta_rad[:, j])
+        seen = np.flatnonzero(sun.visible[:, j])   # the others stay at infinity
+        off = np.hypot(sun.alpha_rad[seen, j], sun.beta_rad[seen, j])
         # DSS heads outrank every CASS (offsets are < π/2 rad).
-        rank[:, j] = np.where(sun.visible[:, j], off + (0.0 if head.kind == "dss" else 10.0),
-                              np.inf)
+        rank[seen, j] = off + (0.0 if head.kind == "dss" else 10.0)
     best = np.argmin(rank, axis=1)
     return np.where(np.isfinite(rank[np.arange(n), best]), best, -1)
 

@@ -157,12 +157,13 @@ def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environm
     # adds R to the z component (a parallax of up to R/AU = 0.016°).
     phase = sun["ra"] - alpha
     d, radius = sun["dist"], orbit.radius_m
+    d_cos_dec, cos_phase = d * sun["cos_dec"], np.cos(phase)   # each formed once
     sun_r = np.empty((n, 3))
-    sun_r[:, 0] = d * sun["cos_dec"] * np.sin(phase)
+    sun_r[:, 0] = d_cos_dec * np.sin(phase)
     sun_r[:, 1] = -d * sun["sin_dec"]
-    sun_r[:, 2] = radius - d * sun["cos_dec"] * np.cos(phase)
+    sun_r[:, 2] = radius - d_cos_dec * cos_phase
     # |d ŝ + R ẑ|² = d² + 2 d R ŝ_z + R²
-    sat_sun_dist = np.sqrt(d * (d - 2.0 * radius * sun["cos_dec"] * np.cos(phase)) + radius**2)
+    sat_sun_dist = np.sqrt(d * (d - 2.0 * radius * sun["cos_dec"] * cos_phase) + radius**2)
     sun_r /= sat_sun_dist[:, None]
     mag = env.magnetic
     if mag.enabled and np.any(mag.profile_amplitude_Am2):
