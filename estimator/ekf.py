@@ -180,11 +180,9 @@ def ekf_filter(inputs: EkfInputs, params: np.ndarray, omega_n_radps: float,
     s0 = np.concatenate([np.asarray(X0, dtype=float), 0.5 * (P0 + P0.T)[_IU]])
     p = np.concatenate([np.asarray(params, dtype=float), [omega_n_radps]])
     ins = [np.where(present, z, 0.0), present.astype(float), np.where(present, r, 1.0), u]
-    if rows is None:
-        last, aux = engine.run_final(s0, ins, p)
-    else:
-        rows = np.asarray(rows, dtype=np.int64)
-        last, aux = engine.run_rows(s0, ins, p, rows)
+    rows = None if rows is None else np.asarray(rows, dtype=np.int64)
+    last, aux = engine.run_kept(s0, ins, p, rows)
+    if rows is not None:
         present = present[rows]
     o = 9 + N_UT
     nu, S = aux[:, o:o + m.NZ].copy(), aux[:, o + m.NZ:o + 2 * m.NZ].copy()

@@ -332,11 +332,9 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
     scale, Qd_unit = _extra(extra, n)
     inputs = [np.where(present, z, 0.0), present.astype(float), r, _inputs(u, n), scale]
     p = pack_params(disc, Qd_unit)
-    if rows is None:
-        last, aux = engine.run_final(s0, inputs, p)
-    else:
-        rows = np.asarray(rows, dtype=np.int64)
-        last, aux = engine.run_rows(s0, inputs, p, rows)
+    rows = None if rows is None else np.asarray(rows, dtype=np.int64)
+    last, aux = engine.run_kept(s0, inputs, p, rows)
+    if rows is not None:
         present = present[rows]
     nu = aux[:, N_STATES + N_UT:N_STATES + N_UT + 3]
     S = aux[:, -3:]

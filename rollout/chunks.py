@@ -131,6 +131,14 @@ class ChunkedRollout:
             x = x_out[stop - start - 1].copy()
         return x, aux
 
+    def run_kept(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
+                 rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The final carried state and the aux outputs: of every step (``run_final``),
+        or of the steps ``rows`` only (``run_rows``)."""
+        if rows is None:
+            return self.run_final(x0, inputs, p)
+        return self.run_rows(x0, inputs, p, rows)
+
     def run_rows(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
                  rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Like ``run``, but keep only the aux outputs of the steps ``rows`` (sorted)
