@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from dynprop.sim.sensors import SensorSuite, draw_ahead, drawn_rows
-from dynprop.sim.telemetry import Telemetry, join_telemetry, make_telemetry
+from dynprop.sim.sensors import SensorSuite
+from dynprop.sim.telemetry import Telemetry, sense_window
 from dynprop.sim.truth import TruthResult, TruthStream
 
 from . import build
@@ -39,22 +39,14 @@ def simulate(scenario: Scenario, run: int = 0, model=None) -> Simulation:
     ``build.streams(scenario.seed, run)``."""
     rngs = build.streams(scenario.seed, run)
     suite = build.build_sensors(scenario)
-    spacecraft = build.build_spacecraft(scenario)
     stream = TruthStream(
-        spacecraft, build.orbit(scenario), build.build_environment(scenario),
+        build.build_spacecraft(scenario), build.orbit(scenario), build.build_environment(scenario),
         build.build_control(scenario), build.build_initial(scenario), build.epoch(scenario),
         scenario.duration_s, scenario.sample_interval_s, rng=rngs["ripple"], model=model)
-    # Both cores: the truth rolls out in one thread, the sensors' noise is drawn in
-    # another, and this one senses the truth a piece at a time behind the rollout
-    # (the compiled rollout and numpy's generators and ufuncs release the GIL).
-    min_sep = scenario.sensors.sun.min_sun_separation_deg
-    with ThreadPoolExecutor(1) as pool:
-        drawn = pool.submit(draw_ahead, suite, rngs, stream.n_samples, spacecraft.n_wheels)
-        truth, pieces = stream.window(0, stream.n_samples, sense=lambda rows, lo, hi:
-                                      make_telemetry(rows, suite,
-                                                     drawn_rows(drawn.result(), lo, hi),
-                                                     min_sep))
-    return Simulation(scenario, truth, join_telemetry(pieces), suite)
+    with ThreadPoolExecutor(1) as pool:   # both cores (sense_window)
+        truth, tel, _ = sense_window(stream, 0, stream.n_samples, suite, rngs, pool,
+                                     scenario.sensors.sun.min_sun_separation_deg)
+    return Simulation(scenario, truth, tel, suite)
 
 
 def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = None,

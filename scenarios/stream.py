@@ -36,8 +36,7 @@ from dynprop.estimator.kalman import (
     rts_smoother,
 )
 from dynprop.estimator.transition import discretize
-from dynprop.sim.sensors import draw_ahead, drawn_rows
-from dynprop.sim.telemetry import join_telemetry, make_telemetry
+from dynprop.sim.telemetry import sense_window
 from dynprop.sim.truth import TruthStream
 
 from . import build
@@ -124,7 +123,6 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
     yield plan
     suite = build.build_sensors(s)
     rngs = build.streams(s.seed, run)
-    n_wheels = build.build_spacecraft(s).n_wheels
     draws = ThreadPoolExecutor(1)
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
@@ -158,13 +156,7 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 # another and this one senses it behind the rollout, a piece at a
                 # time; the twin's sensors read the same draws again (its generators
                 # would repeat them: the same seeds).
-                drawn = draws.submit(draw_ahead, suite, rngs, b - a, n_wheels)
-                truth, pieces = stream.window(a, b, sense=lambda rows, lo, hi, d=drawn:
-                                              make_telemetry(rows, suite,
-                                                             drawn_rows(d.result(), lo, hi),
-                                                             min_sep))
-                drawn, tel = drawn.result(), join_telemetry(pieces)
-                del pieces
+                truth, tel, drawn = sense_window(stream, a, b, suite, rngs, draws, min_sep)
                 tt = truth_torques(truth, mt, params.omega0_radps)
                 rows = output_rows(a, b, plan.stride) - a
                 tel_cols = telemetry_columns(tel, suite)

@@ -15,7 +15,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sensors import DEG, SensorSuite, SunReadings, earth_sensor, sun_sensors, tachometers
+from .sensors import (
+    DEG,
+    SensorSuite,
+    SunReadings,
+    draw_ahead,
+    drawn_rows,
+    earth_sensor,
+    sun_sensors,
+    tachometers,
+)
 
 MIN_SUN_SEPARATION_DEG = 10.0  # no ground yaw closer than this to the yaw axis
 
@@ -120,3 +129,16 @@ def join_telemetry(pieces: list[Telemetry]) -> Telemetry:
     return Telemetry(*(cat(f) for f in ("t_s", "roll_rad", "pitch_rad", "yaw_rad",
                                          "yaw_sigma_rad", "yaw_head", "wheel_speeds_radps")),
                      sun)
+
+
+def sense_window(stream, a: int, b: int, suite: SensorSuite, rngs, pool,
+                 min_sun_separation_deg: float = MIN_SUN_SEPARATION_DEG):
+    """Samples a … b−1 of a ``sim.truth.TruthStream`` and their telemetry, on both
+    cores: the noise drawn in ``pool`` (one thread) while the truth rolls out and is
+    sensed a piece at a time behind the rollout (``TruthStream.window(sense=...)``).
+    Returns the truth, the telemetry and the draws (``sensors.draw_ahead``), which a
+    second sensing of the same samples can read again."""
+    drawn = pool.submit(draw_ahead, suite, rngs, b - a, stream.spacecraft.n_wheels)
+    truth, pieces = stream.window(a, b, sense=lambda rows, lo, hi: make_telemetry(
+        rows, suite, drawn_rows(drawn.result(), lo, hi), min_sun_separation_deg))
+    return truth, join_telemetry(pieces), drawn.result()
