@@ -93,12 +93,11 @@ class ChunkedRollout:
         return _buffer_of(self._buffers, function)
 
     def run(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
-            out: tuple[np.ndarray, np.ndarray] | None = None, progress=None
+            out: tuple[np.ndarray, np.ndarray] | None = None
             ) -> tuple[np.ndarray, np.ndarray]:
         """One step per row of the (N, k_j) ``inputs``.  Returns the carried states
         (N+1, n_x) including x0, and the aux outputs (N, n_aux): new arrays, or
-        ``out``'s (``allocate``).  ``progress(k)`` is called each time steps 0 … k−1
-        are in them (from this thread: another may read those rows meanwhile)."""
+        ``out``'s (``allocate``), which may be views into a longer run's arrays."""
         arrays = _as_rows(inputs)
         n_steps = len(arrays[0]) if arrays else 0
         states, aux = out if out is not None else self.allocate(n_steps, np.size(x0))
@@ -107,8 +106,6 @@ class ChunkedRollout:
             if not np.may_share_memory(x_out, states):  # a short chunk ran in scratch
                 states[start + 1:stop + 1] = x_out[:stop - start]
                 aux[start:stop] = a_out[:stop - start]
-            if progress is not None:
-                progress(stop)
         return states, aux
 
     def allocate(self, n_steps: int, n_x: int) -> tuple[np.ndarray, np.ndarray]:
