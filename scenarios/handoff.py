@@ -23,43 +23,29 @@ import shutil
 import tempfile
 from pathlib import Path
 
-SHM_ROOT = Path("/dev/shm")
+from .rundir import HANDOFF_PREFIX, SHM_ROOT, clean_stale_handoffs
+
 MIN_OUT_OF_BAND = 1 << 16   # smaller records are not worth a file
 
 
 class HandoffDir:
     """A private directory for one run's handed-off records, removed on close.  Its
     name carries the run's process id, so that the next run removes what a killed
-    one (SIGKILL: no ``finally``) left in memory."""
+    one (SIGKILL: no ``finally``) left in memory (``rundir.clean_stale_handoffs``,
+    which every command writing a run directory calls too)."""
 
     def __init__(self):
         self.path = None
         if SHM_ROOT.is_dir() and os.access(SHM_ROOT, os.W_OK) \
                 and hasattr(os, "posix_fallocate"):
-            remove_stale(SHM_ROOT)
-            self.path = Path(tempfile.mkdtemp(prefix=f"dynprop-{os.getpid()}-", dir=SHM_ROOT))
+            clean_stale_handoffs()
+            self.path = Path(tempfile.mkdtemp(prefix=f"{HANDOFF_PREFIX}{os.getpid()}-",
+                                              dir=SHM_ROOT))
 
     def close(self) -> None:
         if self.path is not None:
             shutil.rmtree(self.path, ignore_errors=True)
             self.path = None
-
-
-def remove_stale(root: Path) -> list[Path]:
-    """Remove the handoff directories under ``root`` whose process is gone."""
-    removed = []
-    for d in root.glob("dynprop-*-*"):
-        try:
-            pid = int(d.name.split("-")[1])
-            os.kill(pid, 0)
-        except ValueError:
-            continue
-        except ProcessLookupError:
-            shutil.rmtree(d, ignore_errors=True)
-            removed.append(d)
-        except PermissionError:   # another user's live process
-            continue
-    return removed
 
 
 def pack(obj, directory: Path | None) -> tuple:

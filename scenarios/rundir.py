@@ -129,6 +129,26 @@ def clean_stale(parent: Path) -> list[str]:
     return notes
 
 
+SHM_ROOT = Path("/dev/shm")
+HANDOFF_PREFIX = "dynprop-"   # scenarios.handoff's directories: dynprop-<pid>-<random>
+
+
+def clean_stale_handoffs(root: Path = SHM_ROOT) -> list[Path]:
+    """Remove the record handoff directories (``scenarios.handoff``) under ``root``
+    whose run is gone: a killed `dynprop run` leaves its records in memory there."""
+    removed = []
+    for path in root.glob(f"{HANDOFF_PREFIX}*-*"):
+        try:
+            pid = int(path.name[len(HANDOFF_PREFIX):].split("-")[0])
+            since = path.stat().st_mtime
+        except (ValueError, OSError):
+            continue
+        if _owner_is_gone(pid, since):
+            shutil.rmtree(path, ignore_errors=True)
+            removed.append(path)
+    return removed
+
+
 @contextlib.contextmanager
 def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
     """Yield a temporary sibling directory; on success it replaces ``out``.
@@ -142,6 +162,8 @@ def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
     out.parent.mkdir(parents=True, exist_ok=True)
     for note in clean_stale(out.parent):
         print(f"dynprop: note: {note}", file=sys.stderr)
+    if SHM_ROOT.is_dir():
+        clean_stale_handoffs()
     stage = Path(tempfile.mkdtemp(prefix=_owner_prefix(out, "stage"), dir=out.parent))
     # mkdtemp makes 0700; give the finished directory the user's usual permissions.
     umask = os.umask(0)

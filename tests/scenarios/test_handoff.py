@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from scenarios import handoff
+from scenarios.rundir import clean_stale_handoffs
 
 
 @pytest.fixture
@@ -62,7 +63,7 @@ def test_a_killed_runs_directory_is_removed_by_the_next(tmp_path):
     alive.mkdir()
     other = tmp_path / "dynprop-cache"
     other.mkdir()
-    assert handoff.remove_stale(tmp_path) == [left]
+    assert clean_stale_handoffs(tmp_path) == [left]
     assert not left.exists() and alive.exists() and other.exists()
 
 
