@@ -118,17 +118,38 @@ def make_telemetry(truth, suite: SensorSuite, rngs,
     return Telemetry(truth.t_s, roll, pitch, yaw, sigma, head, speeds, sun)
 
 
-def join_telemetry(pieces: list[Telemetry]) -> Telemetry:
-    """Consecutive pieces' telemetry as one (``TruthStream.window(sense=...)``)."""
-    if len(pieces) == 1:
-        return pieces[0]
+class TelemetryRows:
+    """A window's telemetry gathered piece by piece as it is sensed (``put``), into
+    arrays of the whole window, so the joining is done while the truth still rolls
+    out rather than all at once after it."""
 
-    def cat(name, of=lambda p: p):
-        return np.concatenate([getattr(of(p), name) for p in pieces])
-    sun = SunReadings(*(cat(f, lambda p: p.sun) for f in ("visible", "alpha_rad", "beta_rad")))
-    return Telemetry(*(cat(f) for f in ("t_s", "roll_rad", "pitch_rad", "yaw_rad",
-                                         "yaw_sigma_rad", "yaw_head", "wheel_speeds_radps")),
-                     sun)
+    _FIELDS = ("t_s", "roll_rad", "pitch_rad", "yaw_rad", "yaw_sigma_rad", "yaw_head",
+               "wheel_speeds_radps")
+
+    def __init__(self, n: int):
+        self.n = n
+        self.only: Telemetry | None = None   # a single piece spanning the window
+        self.arrays: dict[str, np.ndarray] | None = None
+
+    def put(self, tel: Telemetry, lo: int, hi: int) -> None:
+        if lo == 0 and hi == self.n:
+            self.only = tel
+            return
+        parts = {**{f: getattr(tel, f) for f in self._FIELDS},
+                 **{f"sun.{f}": getattr(tel.sun, f) for f in ("visible", "alpha_rad",
+                                                             "beta_rad")}}
+        if self.arrays is None:
+            self.arrays = {k: np.empty((self.n, *v.shape[1:]), v.dtype)
+                           for k, v in parts.items()}
+        for k, v in parts.items():
+            self.arrays[k][lo:hi] = v
+
+    def telemetry(self) -> Telemetry:
+        if self.only is not None:
+            return self.only
+        a = self.arrays
+        sun = SunReadings(a["sun.visible"], a["sun.alpha_rad"], a["sun.beta_rad"])
+        return Telemetry(*(a[f] for f in self._FIELDS), sun)
 
 
 def sense_window(stream, a: int, b: int, suite: SensorSuite, rngs, pool,
@@ -139,6 +160,10 @@ def sense_window(stream, a: int, b: int, suite: SensorSuite, rngs, pool,
     Returns the truth, the telemetry and the draws (``sensors.draw_ahead``), which a
     second sensing of the same samples can read again."""
     drawn = pool.submit(draw_ahead, suite, rngs, b - a, stream.spacecraft.n_wheels)
-    truth, pieces = stream.window(a, b, sense=lambda rows, lo, hi: make_telemetry(
-        rows, suite, drawn_rows(drawn.result(), lo, hi), min_sun_separation_deg))
-    return truth, join_telemetry(pieces), drawn.result()
+    gathered = TelemetryRows(b - a)
+
+    def sense(rows, lo, hi) -> None:
+        gathered.put(make_telemetry(rows, suite, drawn_rows(drawn.result(), lo, hi),
+                                    min_sun_separation_deg), lo, hi)
+    truth, _ = stream.window(a, b, sense=sense)
+    return truth, gathered.telemetry(), drawn.result()

@@ -143,12 +143,12 @@ def truth_model(n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str = "auto"
 
 
 def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environment,
-                ripple: np.ndarray, extra_torque: np.ndarray | None, wheel_torque: np.ndarray
-                | None, sun: dict[str, np.ndarray], shadow: np.ndarray
-                ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Per-step inputs of ``step.input_layout`` at the samples ``t_s``, from the Sun
-    there (``_sun_on_grid``) and the shadow (``TruthStream._shadow``)."""
-    n, n_wheels = len(t_s), ripple.shape[1]
+                sun: dict[str, np.ndarray], shadow: np.ndarray, out: dict[str, np.ndarray]
+                ) -> None:
+    """The Sun-driven step inputs of ``step.input_layout`` at the samples ``t_s``, from
+    the Sun there (``_sun_on_grid``) and the shadow (``TruthStream._shadow``), written
+    into ``out``'s arrays of those samples: ``sun_r``, ``sun_scale`` and, when the
+    magnetic profile is on, ``m_prof`` (``TruthStream._window_inputs`` sets the rest)."""
     jd0 = ephemeris.julian_date(epoch)
     alpha = orbit.right_ascension(t_s, ephemeris.gmst_rad(jd0))
     # Satellite-to-Sun direction in the orbit frame.  The geocentric Sun, at right
@@ -158,24 +158,21 @@ def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environm
     phase = sun["ra"] - alpha
     d, radius = sun["dist"], orbit.radius_m
     d_cos_dec, cos_phase = d * sun["cos_dec"], np.cos(phase)   # each formed once
-    sun_r = np.empty((n, 3))
+    sun_r = out["sun_r"]
     sun_r[:, 0] = d_cos_dec * np.sin(phase)
     sun_r[:, 1] = -d * sun["sin_dec"]
     sun_r[:, 2] = radius - d_cos_dec * cos_phase
     # |d ŝ + R ẑ|² = d² + 2 d R ŝ_z + R²
     sat_sun_dist = np.sqrt(d * (d - 2.0 * radius * sun["cos_dec"] * cos_phase) + radius**2)
     sun_r /= sat_sun_dist[:, None]
+    np.multiply(shadow, (ephemeris.AU_M / sat_sun_dist) ** 2, out=out["sun_scale"])
+    if _profiled(env):
+        out["m_prof"][:] = env.magnetic.profile(t_s)
+
+
+def _profiled(env: Environment) -> bool:
     mag = env.magnetic
-    if mag.enabled and np.any(mag.profile_amplitude_Am2):
-        m_prof = mag.profile(t_s)
-    else:
-        m_prof = np.zeros((n, 3))
-    inputs = {"sun_r": sun_r, "sun_scale": shadow * (ephemeris.AU_M / sat_sun_dist) ** 2,
-              "m_prof": m_prof,
-              "n_ext": _checked(extra_torque, (n, 3), "extra torque"),
-              "u_wheel": _checked(wheel_torque, (n, n_wheels), "wheel torque"),
-              "ripple": ripple}
-    return inputs, shadow
+    return bool(mag.enabled and np.any(mag.profile_amplitude_Am2))
 
 
 def _checked(a: np.ndarray | None, shape: tuple[int, int], name: str) -> np.ndarray:
@@ -329,16 +326,35 @@ class TruthStream:
                             np.arange(len(coarse)), radius, step_len)
         return _shadow_fine(coarse, near, a, alpha, sun, radius, model, every)
 
-    def _inputs(self, a: int, b: int, t_s: np.ndarray, ripple: np.ndarray):
+    def _window_inputs(self, a: int, b: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """Arrays of samples a … b−1 for the step inputs and the shadow: what is known
+        without computing set (zeros, the caller's torques), the rest for ``_fill``."""
+        n, nw = b - a, self.spacecraft.n_wheels
+        inputs = {"sun_r": np.empty((n, 3)), "sun_scale": np.empty(n),
+                  "m_prof": np.empty((n, 3)) if _profiled(self.environment)
+                  else np.zeros((n, 3)),
+                  "n_ext": np.zeros((n, 3)) if self.extra_torque is None
+                  else self.extra_torque[a:b],
+                  "u_wheel": np.zeros((n, nw)) if self.wheel_torque is None
+                  else self.wheel_torque[a:b],
+                  "ripple": np.empty((n, nw)) if self.sigma > 0 else np.zeros((n, nw))}
+        return inputs, np.empty(n)
+
+    def _fill(self, a: int, lo: int, hi: int, t_s: np.ndarray, inputs: dict[str, np.ndarray],
+              shadow: np.ndarray, ripple: bool = True) -> None:
+        """Fill rows lo … hi−1 of ``_window_inputs``' arrays (samples a+lo … a+hi−1 of
+        the run; ``t_s`` their times), and with ``ripple`` draw their ripple: pieces
+        drawn in order continue the generator's one stream as a whole draw would."""
+        cut = slice(lo, hi)
         sun = _sun_on_grid(t_s, self.sun_nodes)
         alpha = self.orbit.right_ascension(t_s, self.gmst0)
-        shadow = self._shadow(a, b, alpha, sun)
-        cut = slice(a, b)
-        return step_inputs(
-            t_s, self.epoch, self.orbit, self.environment, ripple,
-            None if self.extra_torque is None else self.extra_torque[cut],
-            None if self.wheel_torque is None else self.wheel_torque[cut], sun=sun,
-            shadow=shadow)
+        shadow[cut] = self._shadow(a + lo, a + hi, alpha, sun)
+        step_inputs(t_s, self.epoch, self.orbit, self.environment, sun, shadow[cut],
+                    {k: v[cut] for k, v in inputs.items()})
+        if ripple and self.sigma > 0:
+            rows = inputs["ripple"][cut]
+            self.rng.standard_normal(out=rows)
+            rows *= self.sigma
 
     def sun(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Samples a … b−1 (any range, no rollout, nothing carried): their times, the
@@ -347,7 +363,8 @@ class TruthStream:
         if not 0 <= a < b <= self.n_samples:
             raise ValueError(f"samples [{a}, {b}) are outside the run's {self.n_samples}")
         t_s = self._t(np.arange(a, b))
-        inputs, _ = self._inputs(a, b, t_s, np.zeros((b - a, self.spacecraft.n_wheels)))
+        inputs, shadow = self._window_inputs(a, b)
+        self._fill(a, 0, b - a, t_s, inputs, shadow, ripple=False)
         return t_s, inputs["sun_r"], inputs["sun_scale"]
 
     def window(self, a: int, b: int, sense=None, piece: int = SENSE_PIECE):
@@ -366,19 +383,14 @@ class TruthStream:
                              f"[{a}, {b}), next is {self.next_start} of {self.n_samples}")
         n, n_wheels = b - a, self.spacecraft.n_wheels
         t_s = self._t(np.arange(a, b))
-        if self.sigma > 0:
-            ripple = self.sigma * self.rng.standard_normal((n, n_wheels))
-        else:
-            ripple = np.zeros((n, n_wheels))
+        inputs, shadow = self._window_inputs(a, b)
         engine = self.model.rollout_engine
         states, aux = engine.allocate(n, len(self.x))
         if sense is None:
-            inputs, shadow = self._inputs(a, b, t_s, ripple)
+            self._fill(a, 0, n, t_s, inputs, shadow)
             engine.run(self.x, [inputs[name] for name, _ in input_layout(n_wheels)], self.p,
                        out=(states, aux))
             return self._finish(a, t_s, states, aux, inputs, shadow)
-        inputs: dict[str, np.ndarray] = {}
-        shadow = np.empty(n)
         bounds = [(lo, min(lo + piece, n)) for lo in range(0, n, piece)]
         todo: queue.SimpleQueue = queue.SimpleQueue()
         done: queue.SimpleQueue = queue.SimpleQueue()
@@ -401,12 +413,7 @@ class TruthStream:
             rolling = pool.submit(roll)
             try:
                 for lo, hi in bounds:
-                    part, shadow[lo:hi] = self._inputs(a + lo, a + hi, t_s[lo:hi],
-                                                       ripple[lo:hi])
-                    for name, v in part.items():
-                        if name not in inputs:
-                            inputs[name] = np.empty((n, *v.shape[1:]))
-                        inputs[name][lo:hi] = v
+                    self._fill(a, lo, hi, t_s[lo:hi], inputs, shadow)
                     todo.put((lo, hi))
             finally:
                 todo.put(None)

@@ -18,7 +18,7 @@ from sim.environment import Environment
 from sim.frames import GeoOrbit
 from sim.sensors import SensorSuite, draw_ahead
 from sim.spacecraft import goes_next
-from sim.telemetry import join_telemetry, make_telemetry
+from sim.telemetry import TelemetryRows, make_telemetry
 from sim.truth import TORQUE_SOURCES, InitialState, TruthResult, TruthStream
 
 # 03:30 UTC on the equinox: local midnight at 75° W (the eclipse, ~70 min) falls
@@ -159,7 +159,10 @@ def test_sensing_behind_the_rollout_gives_the_whole_runs_truth_and_telemetry(who
     assert spans[0] == (0, 1063) and spans[-1][1] == stream.n_samples
     one = make_telemetry(whole, suite, rngs())
     _assert_same_telemetry(one, pieces)
-    _assert_same_telemetry(one, [join_telemetry(pieces)])
+    gathered = TelemetryRows(stream.n_samples)
+    for tel, (lo, hi) in zip(pieces, spans, strict=True):
+        gathered.put(tel, lo, hi)
+    _assert_same_telemetry(one, [gathered.telemetry()])
     assert stream.next_start == stream.n_samples
 
 
