@@ -9,7 +9,9 @@ gets truth.png and telemetry.png from its CSV files.
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -209,13 +211,36 @@ def plot_run_figures(run_dir: Path) -> list[Path]:
     comparison.npz (and daily.csv for season.png, when it holds three days or more);
     the set is ``figure_set`` of the stored keys, and figures of another set left by
     an earlier drawing are removed."""
+    return _draw_all(_run_jobs(run_dir))
+
+
+@contextlib.contextmanager
+def run_figures_drawn(run_dir: Path) -> Iterator[list[Path]]:
+    """``plot_run_figures``, drawn in two worker processes while the block runs: the
+    caller waits for something else meanwhile (`run`: its producer writing the last
+    of truth.csv and telemetry.csv).  The yielded list holds the figures' paths once
+    the block has ended and every figure is saved; an error in the block stops the
+    drawing."""
+    jobs = _run_jobs(run_dir)
+    written: list[Path] = []
+    if len(jobs) < 2 or (os.cpu_count() or 1) < 2:
+        yield written
+        written.extend(_draw(j) for j in jobs)
+        return
+    with worker_pool(2, get_context("fork")) as pool:
+        drawing = [pool.submit(_draw, j) for j in jobs]
+        yield written
+        written.extend(f.result() for f in drawing)
+
+
+def _run_jobs(run_dir: Path) -> list:
     run_dir = Path(run_dir)
     names, builders = _run_builders(run_dir)
     out = run_dir / "plots"
     out.mkdir(exist_ok=True)
     for stale in set(RUN_FIGURES + SIMULATE_FIGURES) - set(names):
         (out / stale).unlink(missing_ok=True)
-    return _draw_all([(*builders[name](), out / name) for name in names])
+    return [(*builders[name](), out / name) for name in names]
 
 
 def plot_simulation(run_dir: Path) -> list[Path]:

@@ -12,8 +12,10 @@ duration.  Progress: a bar of simulated days on a terminal, otherwise a line eve
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
+from itertools import islice
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -127,7 +129,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     plan = next(records)
     # The figures' modules (matplotlib: ~0.4 s) load while the producer simulates the
     # first window, rather than after the last.
-    from .plotting import plot_run_figures
+    from .plotting import plot_run_figures, run_figures_drawn
     params, _ = build.estimator_model(s)
     dt = s.sample_interval_s
     n = plan.n_samples
@@ -139,8 +141,14 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     extra = {name: (FilterFigures(name), CsvAppender(stage / f"estimate_{name}.csv"))
              for name in s.estimator.filters if name != "paper"}
     bar = Progress(n * dt / DAY_S, progress and len(plan.bounds) > 1)
+    # The figures need only comparison.npz and daily.csv, so they are drawn while the
+    # producer writes the last of its files; a trim loop's figure also reads
+    # trim_loop.csv, which the producer writes, so that run draws after it.
+    overlap = s.trim.every_days is None
     try:
-        for rec in records:
+        # The windows' records, and not one more: asking for the next would wait for
+        # the producer to finish its files (stream.windows_of drains it there).
+        for rec in islice(records, len(plan.bounds)):
             err = rec["real"].x - rec["truth_model"]
             err_lin = rec["linear"].x - rec["twin_model"]
             nees_idx, nees_real, nees_lin = window_nees(rec)
@@ -156,6 +164,12 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
                                              rec[name].sigma[k], params.omega_n_radps))
             bar.update(rec["stop"] * dt / DAY_S)
             del rec, err, err_lin
+        bar.close()
+        comparison.finish(stage / "comparison.npz", plan.stride * dt)
+        write_csv(stage / "daily.csv", daily.columns())
+        with run_figures_drawn(stage) if overlap else contextlib.nullcontext():
+            for _ in records:   # none left: the producer finishing its files
+                pass
     finally:
         # Stop the producer now (not when the generators are collected), so that an
         # interrupted run's second process is gone before its stage is removed.
@@ -165,8 +179,6 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         for _, file in extra.values():
             file.close()
         bar.close()
-    comparison.finish(stage / "comparison.npz", plan.stride * dt)
-    write_csv(stage / "daily.csv", daily.columns())
     summary = assemble_summary(s, params, figures.backend, True, True, figures.figures(n))
     summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
                    daily="daily.csv")
@@ -175,7 +187,8 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         summary[name] = figs.summary()
     if s.trim.every_days is not None:
         summary["trim_loop"] = loop_summary(s, stage / "trim_loop.csv")
-    plot_run_figures(stage)
+    if not overlap:
+        plot_run_figures(stage)
     write_summary(stage / "summary.json", summary)
     return summary
 
