@@ -215,3 +215,24 @@ def test_gaps_found_window_by_window_are_sun_gaps_of_the_whole_mask():
             tracker.add(int(a), present[a:b])
         tracker.finish(n)
         assert tracker.gaps == [(int(a), int(b)) for a, b in sun_gaps(present, 1.0, min_s / 3600)]
+
+
+def test_an_error_while_the_figures_are_drawn_comes_out_and_stops_them(tmp_path, monkeypatch):
+    """The figures are drawn in two workers while the producer writes the last of its
+    files (plotting.run_figures_drawn); a failure there (here: the drain raising, as a
+    full disk would in the producer) is the run's error, and no drawing worker is
+    left behind."""
+    import multiprocessing
+
+    import psutil
+
+    from scenarios import stream
+
+    def full_disk(self):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(stream.Demux, "drain", full_disk)
+    s = load_scenario("goes_next_equinox", ["duration_s=7200"])
+    with pytest.raises(OSError, match="No space left"):
+        stream_to_directory(s, tmp_path, processes=1, progress=False)
+    assert multiprocessing.active_children() == []
+    assert psutil.Process().children(recursive=True) == []
