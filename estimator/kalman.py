@@ -313,14 +313,17 @@ def _inputs(u, n) -> np.ndarray:
 
 
 def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None = None,
-                  chunk: int = 4096, rows=None, extra: ExtraNoise | None = None
-                  ) -> FilterResult:
+                  chunk: int = 4096, rows=None, extra: ExtraNoise | None = None,
+                  covariance_rows=None) -> FilterResult:
     """Run the filter over every sample.  ``disc`` has Φ, Γ, Q_d for the sample
     interval (``estimator.transition.discretize``); x0, P0 are the prior at the first
     sample; ``u`` the (N, 9) input vectors of Eq. 12a (zero if None).  With ``rows``
     (increasing sample indices) the history holds only those samples, bit for bit
-    the full run's, without the full history's memory.  ``extra`` adds process
-    noise on chosen steps (``ExtraNoise``: a telemetry dropout)."""
+    the full run's, without the full history's memory; with ``covariance_rows``
+    instead, only ``P_packed`` is cut to those samples (the estimates, innovations and
+    their variances stay at every sample), for a run that needs the covariance only
+    where it forms the NEES.  ``extra`` adds process noise on chosen steps
+    (``ExtraNoise``: a telemetry dropout)."""
     z, r = meas.z(), meas.r()
     n = len(z)
     x0, P0 = np.asarray(x0, dtype=float), np.asarray(P0, dtype=float)
@@ -332,6 +335,18 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
     scale, Qd_unit = _extra(extra, n)
     inputs = [np.where(present, z, 0.0), present.astype(float), r, _inputs(u, n), scale]
     p = pack_params(disc, Qd_unit)
+    if covariance_rows is not None:
+        if rows is not None:
+            raise ValueError("rows and covariance_rows exclude each other")
+        # x (9), then ν and S (3 each) after the packed covariance: every sample.
+        last, aux, P_rows = engine.run_columns(
+            s0, inputs, p, np.r_[0:N_STATES, N_STATES + N_UT:engine.n_aux],
+            np.asarray(covariance_rows, dtype=np.int64), np.arange(N_STATES, N_STATES + N_UT))
+        nu, S = aux[:, N_STATES:N_STATES + 3], aux[:, N_STATES + 3:]
+        nu[~present] = np.nan
+        S[~present] = np.nan
+        return FilterResult(aux[:, :N_STATES], P_rows, nu, S, last[:N_STATES],
+                            unpack(last[N_STATES:]), engine.backend)
     rows = None if rows is None else np.asarray(rows, dtype=np.int64)
     last, aux = engine.run_kept(s0, inputs, p, rows)
     if rows is not None:

@@ -155,6 +155,28 @@ class ChunkedRollout:
             x = x_out[stop - start - 1].copy()
         return x, kept
 
+    def run_columns(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
+                    columns: np.ndarray, rows: np.ndarray, row_columns: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The final carried state, the aux ``columns`` of every step, and the aux
+        ``row_columns`` of the steps ``rows`` (sorted) only: a filter's estimates at
+        every sample and its covariance on chosen ones, bit for bit ``run``'s,
+        through one reused scratch block, without writing the whole aux history."""
+        arrays = _as_rows(inputs)
+        n_steps = len(arrays[0]) if arrays else 0
+        rows = np.asarray(rows, dtype=np.int64)
+        if rows.size and (rows[0] < 0 or rows[-1] >= n_steps or np.any(np.diff(rows) <= 0)):
+            raise ValueError("rows must be increasing step indices within the rollout")
+        every = np.empty((n_steps, len(columns)))
+        kept = np.empty((len(rows), len(row_columns)))
+        x = np.array(x0, dtype=float).reshape(-1)
+        for start, stop, x_out, a_out in self._chunks(x0, arrays, p):
+            every[start:stop] = a_out[:stop - start, columns]
+            lo, hi = np.searchsorted(rows, [start, stop])
+            kept[lo:hi] = a_out[rows[lo:hi] - start][:, row_columns]
+            x = x_out[stop - start - 1].copy()
+        return x, every, kept
+
     def _chunks(self, x0, arrays, p, states=None, aux=None):
         """Roll out every chunk, yielding (start, stop, x_out, a_out): the chunk's
         carried states and aux outputs, rows 0 … stop−start−1 valid.  Full chunks

@@ -54,7 +54,7 @@ from .pipeline import (
 )
 from .schema import Scenario, output_stride
 from .trim_loop import TrimLoop
-from .twin_stream import TwinFilter, lighten_twin, padded_inputs, twin_window
+from .twin_stream import TwinFilter, lighten_twin, nees_rows, padded_inputs, twin_window
 
 DAY_S = 86400.0
 SINGLE_WINDOW_S = 2 * DAY_S
@@ -263,7 +263,10 @@ def filtered(s: Scenario, records, names=("real", "linear")):
         nxt = None if cur["index"] == len(plan.bounds) - 1 else next(records, None)
         for name in names:
             meas, u, extra = padded_inputs(s, params, plan, prev, cur, nxt, keys[name])
-            result = kalman_filter(meas, disc, *priors[name], u=u, extra=extra)
+            # The twin's covariance only where its NEES is formed (lighten_twin).
+            rows = nees_rows(cur) if name == "linear" else None
+            result = kalman_filter(meas, disc, *priors[name], u=u, extra=extra,
+                                   covariance_rows=rows)
             priors[name] = (result.x_next, result.P_next)
             cur[name], cur[f"{name}_in"] = result, (u, extra)
         if ekf is not None and "real" in names:

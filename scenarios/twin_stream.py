@@ -69,7 +69,10 @@ class TwinFilter:
     def _filter(self, cur: dict, nxt: dict | None) -> list[dict]:
         meas, u, extra = padded_inputs(self.s, self.params, self.plan, self.prev, cur, nxt,
                                         "twin_meas")
-        result = kalman_filter(meas, self.disc, *self.prior, u=u, extra=extra)
+        # The covariance is kept only where the NEES is formed (lighten_twin): the
+        # whole history would be three quarters of the filter's output.
+        result = kalman_filter(meas, self.disc, *self.prior, u=u, extra=extra,
+                               covariance_rows=nees_rows(cur))
         self.prior = (result.x_next, result.P_next)
         self.prev = {"twin_meas": tuple(None if v is None else v[-self.plan.pad:]
                                         for v in cur["twin_meas"])}
@@ -80,13 +83,10 @@ class TwinFilter:
 
 def lighten_twin(rec: dict) -> None:
     """What the summary and figures need of the twin's filter, once the next window
-    no longer needs its telemetry: its NEES (computed here), estimates and
-    innovations, not its covariance history."""
-    a, n = rec["start"], len(rec["t_s"])
-    idx = output_rows(a, a + n, NEES_STRIDE)
-    lin = rec["linear"]
-    k = idx - a
-    rec["nees_linear"] = nees(lin.x[k], unpack(lin.P_packed[k]), rec["twin_model"][k])
+    no longer needs its telemetry: its NEES (computed here, from the covariance the
+    filter kept on those samples alone), estimates and innovations."""
+    lin, k = rec["linear"], nees_rows(rec)
+    rec["nees_linear"] = nees(lin.x[k], unpack(lin.P_packed), rec["twin_model"][k])
     # Contiguous copies (not views of the filter's 60-column output): the record
     # crosses to the consumer (``handoff``), which sends contiguous arrays by file
     # and would pickle views through the pipe.
@@ -96,6 +96,12 @@ def lighten_twin(rec: dict) -> None:
                                     backend=lin.backend)
     rec.pop("twin_meas", None)
     rec.pop("linear_in", None)
+
+
+def nees_rows(rec: dict) -> np.ndarray:
+    """The window's samples (from 0) on which the NEES is formed."""
+    a, n = rec["start"], len(rec["t_s"])
+    return output_rows(a, a + n, NEES_STRIDE) - a
 
 
 def padded_inputs(s, params, plan, prev, cur, nxt, key: str):

@@ -403,3 +403,30 @@ def test_extra_noise_on_chosen_steps_matches_the_dense_references(rng):
     with pytest.raises(ValueError, match="extra noise"):
         kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0,
                       extra=ExtraNoise(-scale, unit))
+
+
+@pytest.mark.parametrize("chunk", [256, 4096])
+def test_covariance_on_chosen_rows_is_the_full_runs(rng, chunk):
+    """``covariance_rows``: the estimates, innovations and their variances at every
+    sample and the covariance on the chosen ones are the full run's bit for bit (the
+    same compiled steps; only what is kept differs), across chunk boundaries and the
+    short final chunk; so is ``rows``, which keeps everything on the chosen ones."""
+    n = 3000
+    u = input_vector(PARAMS, 1e-6 * np.sin(np.arange(n) / 500), -2e-6, 1e-5)
+    _, z = simulate_linear(n, 1, rng, u=u, yaw_hours=0.2)
+    z = z[:, 0]
+    z[::7, 0] = np.nan
+    full = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, u=u, chunk=chunk)
+    keep = np.r_[0, 255, 256, 257, np.arange(300, n, 16), n - 1]
+    cut = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, u=u, chunk=chunk,
+                        covariance_rows=keep)
+    for name in ("x", "innovations", "innovation_var", "x_next", "P_next"):
+        assert np.array_equal(getattr(cut, name), getattr(full, name), equal_nan=True), name
+    assert np.array_equal(cut.P_packed, full.P_packed[keep])
+    rows = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, u=u, chunk=chunk, rows=keep)
+    for name in ("x", "P_packed", "innovations", "innovation_var"):
+        assert np.array_equal(getattr(rows, name), getattr(full, name)[keep], equal_nan=True)
+    with pytest.raises(ValueError, match="increasing"):
+        kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, covariance_rows=keep[::-1])
+    with pytest.raises(ValueError, match="exclude"):
+        kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, rows=keep, covariance_rows=keep)
