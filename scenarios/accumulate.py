@@ -14,8 +14,7 @@ from __future__ import annotations
 from datetime import timedelta
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds, nees, nis
-from dynprop.estimator.kalman import unpack
+from dynprop.estimator.consistency import chi2_bounds, nis
 from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 
 from .decimate import output_rows
@@ -296,10 +295,8 @@ class DailyFigures:
 
 
 def window_nees(rec: dict):
-    """Global NEES indices of the window, the real filter's NEES there, and the
-    twin's (computed where the twin was filtered, ``twin_stream.lighten_twin``)."""
+    """Global NEES indices of the window, the real filter's NEES there (formed once
+    the window was smoothed, ``stream._lighten_real``) and the twin's (where the twin
+    was filtered, ``twin_stream.lighten_twin``)."""
     a, b = rec["start"], rec["start"] + len(rec["t_s"])
-    idx = output_rows(a, b, NEES_STRIDE)
-    k = idx - a
-    real = nees(rec["real"].x[k], unpack(rec["real"].P_nees), rec["truth_model"][k])
-    return idx, real, rec.get("nees_linear")
+    return output_rows(a, b, NEES_STRIDE), rec["nees_real"], rec.get("nees_linear")

@@ -29,11 +29,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
+from dynprop.estimator.consistency import nees
 from dynprop.estimator.kalman import (
     ExtraNoise,
     FilterResult,
     kalman_filter,
     rts_smoother,
+    unpack,
 )
 from dynprop.estimator.transition import discretize
 from dynprop.sim.telemetry import sense_window
@@ -324,14 +326,15 @@ def smoothed(s: Scenario, records, smooth: bool = True):
 
 def _lighten_real(rec: dict) -> None:
     """What the summary and files need of the real filter once the window is smoothed:
-    estimate, σ, innovations and the covariance on the NEES samples only (a third of
-    the window's memory)."""
+    estimate, σ, innovations and its NEES (``nees_real``, on the NEES samples; formed
+    here, before the window's twin record comes, which the consumer would otherwise
+    wait for idle), not the covariance history."""
     a, n = rec["start"], len(rec["t_s"])
-    real = rec["real"]
+    real, k = rec["real"], output_rows(a, a + n, NEES_STRIDE) - a
+    rec["nees_real"] = nees(real.x[k], unpack(real.P_packed[k]), rec["truth_model"][k])
     rec["real"] = SimpleNamespace(
         x=real.x, sigma=real.sigma, innovations=real.innovations,
-        innovation_var=real.innovation_var, backend=real.backend,
-        P_nees=real.P_packed[output_rows(a, a + n, NEES_STRIDE) - a])
+        innovation_var=real.innovation_var, backend=real.backend)
     rec.pop("real_in", None)
     if rec.get("ekf") is not None:
         e = rec["ekf"]
