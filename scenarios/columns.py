@@ -77,6 +77,17 @@ def as_decimal_reading(values: np.ndarray, quantum: float) -> np.ndarray:
         return np.round(np.round(values / quantum) * quantum, d)
 
 
+def telemetry_lattices(suite, n_wheels: int) -> dict[str, float]:
+    """The reading quantum of each quantised column of ``telemetry_columns`` (its
+    values are ``as_decimal_reading``'s), for ``csvio``'s faster exact text."""
+    earth_q, tach_q = suite.earth.quantum_deg, suite.tachometer.quantum_rpm
+    out = {"roll_deg": earth_q, "pitch_deg": earth_q, "sun_head": 1.0,
+           **{f"wheel{i + 1}_rpm": tach_q for i in range(n_wheels)}}
+    for head in suite.sun_heads:
+        out[f"{head.name}_alpha_deg"] = out[f"{head.name}_beta_deg"] = head.quantum_deg
+    return out
+
+
 def telemetry_columns(tel, suite) -> dict[str, np.ndarray]:
     """What a ground system receives, plus its own yaw solution.
 

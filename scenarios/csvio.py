@@ -40,19 +40,74 @@ BLOCK_ROWS = 40_000
 EXACT_FMT = "%r"  # shortest text that round-trips every double (repr)
 
 
-def _format_block(block: np.ndarray, fmt_one: str = FMT) -> str:
+def _format_block(block: np.ndarray, fmt_one: str = FMT, lattices=None) -> str:
+    """Rows of ``block`` as CSV text.  With ``EXACT_FMT``, ``lattices`` may give each
+    column's reading quantum (None for a column that has none): see
+    ``_lattice_text``."""
+    if fmt_one == EXACT_FMT and lattices is not None and any(lattices):
+        return _format_exact(block, lattices)
     fmt = ",".join([fmt_one] * block.shape[1]) + "\n"
     text = (fmt * block.shape[0]) % tuple(block.ravel().tolist())
+    return _empty_nan(text)
+
+
+def _format_exact(block: np.ndarray, lattices) -> str:
+    """``_format_block(block, EXACT_FMT)``, byte for byte, with the quantised columns'
+    text looked up rather than formatted value by value."""
+    cells = np.empty(block.shape, dtype=object)
+    fmts = []
+    for j, q in enumerate(lattices):
+        text = _lattice_text(block[:, j], q) if q else None
+        if text is None:
+            cells[:, j] = block[:, j]   # Python floats, formatted by %r
+            fmts.append(EXACT_FMT)
+        else:
+            cells[:, j] = text
+            fmts.append("%s")
+    fmt = ",".join(fmts) + "\n"
+    return _empty_nan((fmt * block.shape[0]) % tuple(cells.ravel().tolist()))
+
+
+def _lattice_text(values: np.ndarray, quantum: float) -> np.ndarray | None:
+    """repr of each value of a column of quantised readings (``columns.
+    as_decimal_reading``: round(k·q, d) for integer k, d the quantum's decimals),
+    from one repr per reading level: a reading's text is the table's only where its
+    double is the level's bit for bit (−0.0 included), otherwise its own repr.
+    None when the column is not worth it (no decimals, too many levels)."""
+    d = next((d for d in range(13) if round(quantum, d) == quantum), None)
+    if d is None:
+        return None
+    with np.errstate(invalid="ignore", over="ignore"):
+        k = np.round(values / quantum)
+    ok = np.isfinite(k)
+    if not ok.any():
+        return None
+    lo, hi = k[ok].min(), k[ok].max()
+    if hi - lo > 100_000:
+        return None
+    levels = np.append(np.round(np.arange(lo, hi + 1) * quantum, d), np.nan)
+    table = np.array(list(map(repr, levels.tolist())), dtype=object)
+    idx = np.where(ok, k - lo, len(levels) - 1).astype(np.int64)
+    text = table[idx]
+    same = levels[idx].view(np.int64) == values.view(np.int64)
+    other = np.flatnonzero(~same & ~np.isnan(values))
+    text[other] = list(map(repr, values[other].tolist()))
+    return text
+
+
+def _empty_nan(text: str) -> str:
     # NaN marks a missing value: an empty field.  ",nan" cannot occur otherwise.
     text = text.replace(",nan", ",").replace("\nnan", "\n")
     return text[3:] if text.startswith("nan") else text
 
 
 def write_csv(path: Path | str, columns: dict[str, np.ndarray], workers: int | None = None,
-              progress=None, exact: bool = False) -> None:
+              progress=None, exact: bool = False,
+              lattices: dict[str, float] | None = None) -> None:
     """Write named equal-length columns; ``progress(n_rows)`` is called per block.
     ``exact`` writes the shortest round-trip text, so that reading the file back
-    gives the very same doubles."""
+    gives the very same doubles; ``lattices`` (column name to reading quantum) only
+    makes that faster, never different (``_lattice_text``)."""
     names = list(columns)
     data = np.column_stack([np.asarray(columns[k], dtype=float) for k in names])
     blocks = [data[i:i + BLOCK_ROWS] for i in range(0, len(data), BLOCK_ROWS)]
@@ -63,11 +118,17 @@ def write_csv(path: Path | str, columns: dict[str, np.ndarray], workers: int | N
     with open(path, "w", newline="") as fh, pool as executor:
         fh.write(",".join(names) + "\n")
         fmts = [EXACT_FMT if exact else FMT] * len(blocks)
-        texts = (executor.map if executor is not None else map)(_format_block, blocks, fmts)
+        quanta = [_quanta(names, lattices)] * len(blocks)
+        texts = (executor.map if executor is not None else map)(_format_block, blocks, fmts,
+                                                                quanta)
         for block, text in zip(blocks, texts, strict=True):
             fh.write(text)
             if progress is not None:
                 progress(len(block))
+
+
+def _quanta(names: list[str], lattices: dict[str, float] | None) -> tuple | None:
+    return None if lattices is None else tuple(lattices.get(n) for n in names)
 
 
 def _write_quietly(path: Path, columns: dict[str, np.ndarray]) -> None:
@@ -125,9 +186,11 @@ class CsvAppender:
     whole table (every row is formatted on its own, so how the rows arrive in
     blocks changes nothing).  ``close()`` after the last block."""
 
-    def __init__(self, path: Path | str, exact: bool = False):
+    def __init__(self, path: Path | str, exact: bool = False,
+                 lattices: dict[str, float] | None = None):
         self.path = Path(path)
         self.fmt = EXACT_FMT if exact else FMT
+        self.lattices = lattices
         self.fh = open(self.path, "w", newline="")  # noqa: SIM115 (closed by close())
         self.names: list[str] | None = None
 
@@ -138,8 +201,9 @@ class CsvAppender:
         elif list(columns) != self.names:
             raise ValueError(f"{self.path.name}: columns changed between blocks")
         data = np.column_stack([np.asarray(columns[k], dtype=float) for k in self.names])
+        quanta = _quanta(self.names, self.lattices)
         for i in range(0, len(data), BLOCK_ROWS):
-            self.fh.write(_format_block(data[i:i + BLOCK_ROWS], self.fmt))
+            self.fh.write(_format_block(data[i:i + BLOCK_ROWS], self.fmt, quanta))
 
     def close(self) -> None:
         self.fh.close()

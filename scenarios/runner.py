@@ -16,7 +16,7 @@ from dynprop.sim.telemetry import Telemetry, sense_window
 from dynprop.sim.truth import TruthResult, TruthStream
 
 from . import build
-from .columns import telemetry_columns, truth_columns
+from .columns import telemetry_columns, telemetry_lattices, truth_columns
 from .csvio import write_csv
 from .loader import resolved_yaml
 from .schema import Scenario
@@ -62,9 +62,10 @@ def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = 
     (stage / "scenario.yaml").write_text(resolved_yaml(scenario or sim.scenario))
     truth = truth_columns(sim.truth, sim.telemetry.sun_visible)
     tel = telemetry_columns(sim.telemetry, sim.suite)
+    lattices = telemetry_lattices(sim.suite, sim.telemetry.wheel_speeds_radps.shape[1])
     if truth_writer is not None:
         truth_writer(stage / "truth.csv", truth)
-        write_csv(stage / "telemetry.csv", tel, exact=True)
+        write_csv(stage / "telemetry.csv", tel, exact=True, lattices=lattices)
         return tel
     rows = len(sim.truth.t_s)
     if show_progress is None:
@@ -78,7 +79,8 @@ def write_simulation(stage: Path, sim: Simulation, show_progress: bool | None = 
     try:
         update = bar.update if bar is not None else None
         write_csv(stage / "truth.csv", truth, progress=update)
-        write_csv(stage / "telemetry.csv", tel, progress=update, exact=True)
+        write_csv(stage / "telemetry.csv", tel, progress=update, exact=True,
+                  lattices=lattices)
     finally:
         if bar is not None:
             bar.close()

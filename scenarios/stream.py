@@ -42,7 +42,7 @@ from dynprop.sim.telemetry import sense_window
 from dynprop.sim.truth import TruthStream
 
 from . import build
-from .columns import telemetry_columns, truth_columns
+from .columns import telemetry_columns, telemetry_lattices, truth_columns
 from .csvio import CsvAppender
 from .decimate import output_rows
 from .ekf_run import EkfStream
@@ -134,7 +134,9 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
     if out is not None:
         files["truth"] = CsvAppender(Path(out) / "truth.csv")
         if telemetry_file:
-            files["telemetry"] = CsvAppender(Path(out) / "telemetry.csv", exact=True)
+            files["telemetry"] = CsvAppender(
+                Path(out) / "telemetry.csv", exact=True,
+                lattices=telemetry_lattices(suite, stream.spacecraft.n_wheels))
     twin_filter = TwinFilter(s, params, disc, plan)
     loop = None if s.trim.every_days is None else TrimLoop(s, stream, out)
     ekf = "ekf" in s.estimator.filters

@@ -121,3 +121,34 @@ def test_exact_csv_round_trips_any_double(tmp_path):
     y = np.column_stack([back[f"c{k}"] for k in range(4)])
     np.testing.assert_array_equal(y, x)   # identity is the requirement: a re-read
     assert np.signbit(y[9, 1])
+
+
+def test_looked_up_readings_give_the_same_bytes_as_formatting_each_value():
+    """``write_csv(exact=True, lattices=...)`` looks a quantised column's text up per
+    reading level: the bytes must be those of formatting every value with repr,
+    for readings on the lattice and for everything that is not (−0.0, NaN, ±inf,
+    values between levels, a quantum without a short decimal, a column with more
+    levels than the table takes, a column with no reading at all)."""
+    from scenarios.csvio import EXACT_FMT, _format_block
+    rng = np.random.default_rng(11)
+    n = 4000
+    cols, quanta = [], []
+    for q in (0.01, 0.0163, 0.125, 0.039, 1.0, 1 / 3):
+        v = as_decimal_reading(rng.normal(0, 40 * q, n), q)
+        v[rng.random(n) < 0.1] = np.nan
+        v[rng.random(n) < 0.05] = -0.0
+        v[rng.random(n) < 0.05] = 0.0
+        v[rng.random(n) < 0.02] = rng.normal(0, 1, 1)   # off the lattice
+        v[:3] = [np.inf, -np.inf, 5 * q + 1e-13]
+        cols.append(v)
+        quanta.append(q)
+    cols.append(as_decimal_reading(rng.uniform(-1e4, 1e4, n), 0.01))   # 2e6 levels
+    quanta.append(0.01)
+    cols.append(np.full(n, np.nan))
+    quanta.append(0.01)
+    cols.append(rng.normal(0, 1, n))   # not quantised: no lattice
+    quanta.append(None)
+    block = np.column_stack(cols)
+    plain = _format_block(block, EXACT_FMT)
+    assert _format_block(block, EXACT_FMT, tuple(quanta)) == plain
+    assert "-0.0" in plain and "inf" in plain
