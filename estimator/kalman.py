@@ -339,24 +339,21 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
         if rows is not None:
             raise ValueError("rows and covariance_rows exclude each other")
         # x (9), then ν and S (3 each) after the packed covariance: every sample.
-        last, aux, P_rows = engine.run_columns(
+        last, aux, P = engine.run_columns(
             s0, inputs, p, np.r_[0:N_STATES, N_STATES + N_UT:engine.n_aux],
             np.asarray(covariance_rows, dtype=np.int64), np.arange(N_STATES, N_STATES + N_UT))
         nu, S = aux[:, N_STATES:N_STATES + 3], aux[:, N_STATES + 3:]
-        nu[~present] = np.nan
-        S[~present] = np.nan
-        return FilterResult(aux[:, :N_STATES], P_rows, nu, S, last[:N_STATES],
-                            unpack(last[N_STATES:]), engine.backend)
-    rows = None if rows is None else np.asarray(rows, dtype=np.int64)
-    last, aux = engine.run_kept(s0, inputs, p, rows)
-    if rows is not None:
-        present = present[rows]
-    nu = aux[:, N_STATES + N_UT:N_STATES + N_UT + 3]
-    S = aux[:, -3:]
+    else:
+        rows = None if rows is None else np.asarray(rows, dtype=np.int64)
+        last, aux = engine.run_kept(s0, inputs, p, rows)
+        if rows is not None:
+            present = present[rows]
+        P = aux[:, N_STATES:N_STATES + N_UT]
+        nu, S = aux[:, N_STATES + N_UT:N_STATES + N_UT + 3], aux[:, -3:]
     nu[~present] = np.nan
     S[~present] = np.nan
-    return FilterResult(aux[:, :N_STATES], aux[:, N_STATES:N_STATES + N_UT], nu, S,
-                        last[:N_STATES], unpack(last[N_STATES:]), engine.backend)
+    return FilterResult(aux[:, :N_STATES], P, nu, S, last[:N_STATES], unpack(last[N_STATES:]),
+                        engine.backend)
 
 
 def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,

@@ -142,17 +142,7 @@ class ChunkedRollout:
         and the final carried state.  Every chunk is written into one reused scratch
         block, so a long rollout's memory traffic stays in cache; the kept values
         equal ``run``'s bit for bit (same compiled functions, same chunking)."""
-        arrays = _as_rows(inputs)
-        n_steps = len(arrays[0]) if arrays else 0
-        rows = np.asarray(rows, dtype=np.int64)
-        if rows.size and (rows[0] < 0 or rows[-1] >= n_steps or np.any(np.diff(rows) <= 0)):
-            raise ValueError("rows must be increasing step indices within the rollout")
-        kept = np.empty((len(rows), self.n_aux))
-        x = np.array(x0, dtype=float).reshape(-1)
-        for start, stop, x_out, a_out in self._chunks(x0, arrays, p):
-            lo, hi = np.searchsorted(rows, [start, stop])
-            kept[lo:hi] = a_out[rows[lo:hi] - start]
-            x = x_out[stop - start - 1].copy()
+        x, _, kept = self.run_columns(x0, inputs, p, np.arange(0), rows, np.arange(self.n_aux))
         return x, kept
 
     def run_columns(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .columns import decimals_of
 from .workers import ignore_sigint, sigint_held, worker_pool
 
 FMT = "%.10g"
@@ -74,7 +75,7 @@ def _lattice_text(values: np.ndarray, quantum: float) -> np.ndarray | None:
     from one repr per reading level: a reading's text is the table's only where its
     double is the level's bit for bit (−0.0 included), otherwise its own repr.
     None when the column is not worth it (no decimals, too many levels)."""
-    d = next((d for d in range(13) if round(quantum, d) == quantum), None)
+    d = decimals_of(quantum)
     if d is None:
         return None
     with np.errstate(invalid="ignore", over="ignore"):

@@ -58,14 +58,6 @@ def _draw(job) -> Path:
     return save_figure(function(*args, **kwargs), path)
 
 
-def _draw_all(jobs) -> list[Path]:
-    """Draw and save figures, two at a time on two cores (rendering dominates)."""
-    if len(jobs) < 2 or (os.cpu_count() or 1) < 2:
-        return [_draw(j) for j in jobs]
-    with worker_pool(2, get_context("fork")) as pool:
-        return list(pool.map(_draw, jobs))
-
-
 def _title(scenario: dict) -> str:
     return (f"{scenario['name']} — seed {scenario['seed']}, epoch {scenario['epoch_utc']}, "
             f"dynprop {scenario.get('dynprop_version') or '?'}")
@@ -211,7 +203,9 @@ def plot_run_figures(run_dir: Path) -> list[Path]:
     comparison.npz (and daily.csv for season.png, when it holds three days or more);
     the set is ``figure_set`` of the stored keys, and figures of another set left by
     an earlier drawing are removed."""
-    return _draw_all(_run_jobs(run_dir))
+    with run_figures_drawn(run_dir) as written:
+        pass
+    return written
 
 
 @contextlib.contextmanager
@@ -223,6 +217,7 @@ def run_figures_drawn(run_dir: Path) -> Iterator[list[Path]]:
     drawing."""
     jobs = _run_jobs(run_dir)
     written: list[Path] = []
+    # Two at a time on two cores (rendering dominates); one figure needs no pool.
     if len(jobs) < 2 or (os.cpu_count() or 1) < 2:
         yield written
         written.extend(_draw(j) for j in jobs)
