@@ -1,27 +1,26 @@
-"""Roll a one-step CasADi function out over many steps, a chunk per call.
+"""Roll a one-step CasADi function out over many steps.
 
 The step has the signature ``(x, in_1, …, in_m, p) -> (x_next, aux)``: x is carried
 from step to step, each ``in_j`` and ``aux`` have one column per step, and p is a
-parameter vector that is the same for every step.  A long ``mapaccum`` chunk does
-most of the work and a short one finishes the run, so no more than a short
-chunk's worth of padded steps is ever computed.
+parameter vector that is the same for every step.  Compiled, the step runs in a
+C loop of its own (``driver``).  In CasADi's VM a long ``mapaccum`` chunk does most
+of the work and a short one finishes the run, so no more than a short chunk's
+worth of padded steps is ever computed.
 """
 
 from __future__ import annotations
 
-import hashlib
-import os
+import logging
+import subprocess
 import threading
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from .compiled import CFLAGS, cache_dir, compile_function_path, find_compiler, requested_backend
+from . import compiled
+from .driver import CompiledLoop
 
-# Bump when build_chunk's construction changes: the step-keyed cache below does not
-# see it.
-CHUNK_BUILD_VERSION = "1"
+log = logging.getLogger(__name__)
 
 
 def build_chunk(step: ca.Function, chunk: int) -> ca.Function:
@@ -41,56 +40,25 @@ def build_chunk(step: ca.Function, chunk: int) -> ca.Function:
                        ["X", "AUX"])
 
 
-def _step_key_path(step: ca.Function, chunk: int, cc: str) -> Path:
-    key = hashlib.sha256("\n".join([step.serialize(), str(chunk), CHUNK_BUILD_VERSION, cc,
-                                    *CFLAGS, ca.__version__]).encode()).hexdigest()[:20]
-    return cache_dir() / f"{step.name()}_chunk{chunk}_step_{key}.so"
-
-
-def _chunk_function(step: ca.Function, chunk: int, backend: str) -> tuple[ca.Function, str]:
-    """The compiled ``chunk``-step function of ``step``.  Building the mapaccum
-    function costs 0.1–0.2 s a process, so a library already built for this very
-    step (keyed by its serialisation) is loaded without building it; otherwise it is
-    built, compiled (``compile_function``'s source-keyed cache) and linked under the
-    step's key for the next process."""
-    cc = find_compiler() if backend != "vm" else None
-    fast = _step_key_path(step, chunk, cc) if cc else None
-    if fast is not None and fast.exists():
-        try:
-            return ca.external(f"{step.name()}_chunk{chunk}", str(fast)), "compiled"
-        except RuntimeError:
-            pass   # unreadable: build it again below
-    function, used, so_path = compile_function_path(build_chunk(step, chunk), backend)
-    if fast is not None and so_path is not None:
-        try:
-            os.link(so_path, fast)
-        except OSError:
-            pass   # another process linked it first, or links are not allowed: slow path
-    return function, used
-
-
 class ChunkedRollout:
-    """A step function compiled once (main and tail chunk) and rolled out on demand."""
+    """A step function compiled once and rolled out on demand: by its own C loop
+    (``driver``) when compiled; in CasADi's VM by a ``mapaccum`` chunk function
+    (main and tail chunk), the last chunk padded."""
 
     def __init__(self, step: ca.Function, chunk: int = 4096, tail: int = 256,
                  backend: str | None = None):
         self.step = step
         self.chunk = chunk
         self.tail_chunk = min(tail, chunk)
-        self.function, self.backend = _chunk_function(step, chunk,
-                                                      backend or requested_backend())
-        # Function.buffer() costs ~2 ms (a day of truth in 16384-sample pieces made
-        # eleven): one per function and thread, its arguments bound again each call.
-        self._buffers = threading.local()
-        # The tail always uses the backend the main chunk ended up with, so a run
-        # never mixes compiled and VM arithmetic.
-        self.tail_function, _ = _chunk_function(step, self.tail_chunk, self.backend)
         self.n_aux = step.size1_out(1)
-
-    def _buffer(self, function):
-        """This thread's buffer of ``function`` (every argument is bound again by
-        ``_chunks`` before each evaluation, so nothing of a previous call remains)."""
-        return _buffer_of(self._buffers, function)
+        self.loop = _compiled_loop(step, backend or compiled.requested_backend())
+        self.backend = "vm" if self.loop is None else "compiled"
+        if self.loop is None:
+            self.function = build_chunk(step, chunk)
+            self.tail_function = build_chunk(step, self.tail_chunk)
+            # Function.buffer() costs ~2 ms: one per function and thread, its
+            # arguments bound again each call.
+            self._buffers = threading.local()
 
     def run(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
             out: tuple[np.ndarray, np.ndarray] | None = None
@@ -102,10 +70,7 @@ class ChunkedRollout:
         n_steps = len(arrays[0]) if arrays else 0
         states, aux = out if out is not None else self.allocate(n_steps, np.size(x0))
         states[0] = x0
-        for start, stop, x_out, a_out in self._chunks(x0, arrays, p, states, aux):
-            if not np.may_share_memory(x_out, states):  # a short chunk ran in scratch
-                states[start + 1:stop + 1] = x_out[:stop - start]
-                aux[start:stop] = a_out[:stop - start]
+        self._roll(x0, arrays, p, aux, states[1:])
         return states, aux
 
     def allocate(self, n_steps: int, n_x: int) -> tuple[np.ndarray, np.ndarray]:
@@ -114,19 +79,13 @@ class ChunkedRollout:
 
     def run_final(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
-        """Like ``run``, but the carried states go through one reused scratch block:
-        returns only the final carried state, and the aux outputs (N, n_aux), bit for
-        bit ``run``'s (a long filter's state history is as large as its outputs and
-        only its end is used)."""
+        """Like ``run``, but without the carried states' history: returns only the
+        final carried state, and the aux outputs (N, n_aux), bit for bit ``run``'s
+        (a long filter's state history is as large as its outputs and only its end
+        is used)."""
         arrays = _as_rows(inputs)
-        n_steps = len(arrays[0]) if arrays else 0
-        aux = np.empty((n_steps, self.n_aux))
-        x = np.array(x0, dtype=float).reshape(-1)
-        for start, stop, x_out, a_out in self._chunks(x0, arrays, p, None, aux):
-            if not np.may_share_memory(a_out, aux):  # a short chunk ran in scratch
-                aux[start:stop] = a_out[:stop - start]
-            x = x_out[stop - start - 1].copy()
-        return x, aux
+        aux = np.empty((len(arrays[0]) if arrays else 0, self.n_aux))
+        return self._roll(x0, arrays, p, aux), aux
 
     def run_kept(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
                  rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -139,9 +98,7 @@ class ChunkedRollout:
     def run_rows(self, x0: np.ndarray, inputs: list[np.ndarray], p: np.ndarray,
                  rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Like ``run``, but keep only the aux outputs of the steps ``rows`` (sorted)
-        and the final carried state.  Every chunk is written into one reused scratch
-        block, so a long rollout's memory traffic stays in cache; the kept values
-        equal ``run``'s bit for bit (same compiled functions, same chunking)."""
+        and the final carried state, bit for bit ``run``'s."""
         x, _, kept = self.run_columns(x0, inputs, p, np.arange(0), rows, np.arange(self.n_aux))
         return x, kept
 
@@ -150,8 +107,9 @@ class ChunkedRollout:
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The final carried state, the aux ``columns`` of every step, and the aux
         ``row_columns`` of the steps ``rows`` (sorted) only: a filter's estimates at
-        every sample and its covariance on chosen ones, bit for bit ``run``'s,
-        through one reused scratch block, without writing the whole aux history."""
+        every sample and its covariance on chosen ones, bit for bit ``run``'s.  The
+        steps go ``chunk`` at a time through one reused scratch block, so a long
+        rollout's outputs stay in cache and its whole aux history is never written."""
         arrays = _as_rows(inputs)
         n_steps = len(arrays[0]) if arrays else 0
         rows = np.asarray(rows, dtype=np.int64)
@@ -159,20 +117,29 @@ class ChunkedRollout:
             raise ValueError("rows must be increasing step indices within the rollout")
         every = np.empty((n_steps, len(columns)))
         kept = np.empty((len(rows), len(row_columns)))
+        scratch = np.empty((min(self.chunk, n_steps), self.n_aux))
         x = np.array(x0, dtype=float).reshape(-1)
-        for start, stop, x_out, a_out in self._chunks(x0, arrays, p):
-            every[start:stop] = a_out[:stop - start, columns]
+        for start in range(0, n_steps, self.chunk):
+            stop = min(start + self.chunk, n_steps)
+            block = scratch[:stop - start]
+            x = self._roll(x, [a[start:stop] for a in arrays], p, block)
+            every[start:stop] = block[:, columns]
             lo, hi = np.searchsorted(rows, [start, stop])
-            kept[lo:hi] = a_out[rows[lo:hi] - start][:, row_columns]
-            x = x_out[stop - start - 1].copy()
+            kept[lo:hi] = block[rows[lo:hi] - start][:, row_columns]
         return x, every, kept
 
-    def _chunks(self, x0, arrays, p, states=None, aux=None):
-        """Roll out every chunk, yielding (start, stop, x_out, a_out): the chunk's
-        carried states and aux outputs, rows 0 … stop−start−1 valid.  Full chunks
-        write straight into ``states[start+1:]`` and ``aux[start:]`` when given;
-        otherwise (and for a short, padded final chunk) into a reused scratch block."""
-        n_steps = len(arrays[0]) if arrays else 0
+    def _roll(self, x0, arrays, p, aux: np.ndarray, xs: np.ndarray | None = None
+              ) -> np.ndarray:
+        """Steps 0 … len(aux)−1 from ``x0``: their aux outputs into ``aux`` and, if
+        given, the carried state after each into ``xs``.  Returns the final state."""
+        if self.loop is not None:
+            return self.loop(x0, arrays, p, aux, xs)
+        return self._vm_roll(x0, arrays, p, aux, xs)
+
+    def _vm_roll(self, x0, arrays, p, aux, xs):
+        """``_roll`` through the VM's chunk functions: full chunks, then tail chunks,
+        the last padded by repeating its last row (computed and discarded)."""
+        n_steps = len(aux)
         p = np.ascontiguousarray(p, dtype=float)
         x = np.array(x0, dtype=float).reshape(-1)
         n_main = n_steps - n_steps % self.chunk
@@ -181,43 +148,55 @@ class ChunkedRollout:
                                          n_steps)):
             if begin == end:
                 continue
-            # One buffer per function: binding pointers per chunk is cheap, making
-            # a buffer is not.  It keeps raw pointers, so everything bound must stay
-            # alive until run(), and outputs must be views, not silent copies.
-            buf, run = self._buffer(function)
+            # The buffer keeps raw pointers: everything bound stays alive meanwhile.
+            buf, run = _buffer_of(self._buffers, function)
             x_in = np.empty(x.size)
             scratch_x, scratch_a = np.empty((c, x.size)), np.empty((c, self.n_aux))
             padded = [np.empty((c, a.shape[1])) for a in arrays]
             buf.set_arg(0, memoryview(x_in))
+            for i, blk in enumerate(padded, start=1):
+                buf.set_arg(i, memoryview(blk.reshape(-1)))
             buf.set_arg(len(arrays) + 1, memoryview(p))
+            buf.set_res(0, memoryview(scratch_x.reshape(-1)))
+            buf.set_res(1, memoryview(scratch_a.reshape(-1)))
             for start in range(begin, end, c):
                 stop = min(start + c, end)
                 n = stop - start
-                for i, (a, blk) in enumerate(zip(arrays, padded, strict=True), start=1):
-                    if n < c:  # pad by repeating the last row: computed and discarded
-                        blk[:n] = a[start:stop]
-                        blk[n:] = a[stop - 1]
-                    elif a.flags.c_contiguous:
-                        blk = a[start:stop]
-                    else:  # a strided view (the smoother's reversed history): copied
-                        # a chunk at a time, in cache, not the whole array up front
-                        np.copyto(blk, a[start:stop])
-                    buf.set_arg(i, memoryview(blk.reshape(-1)))
-                full = n == c
-                x_out = states[start + 1:stop + 1] if full and states is not None \
-                    else scratch_x
-                a_out = aux[start:stop] if full and aux is not None else scratch_a
-                x_flat, a_flat = x_out.reshape(-1), a_out.reshape(-1)
-                assert np.shares_memory(x_flat, x_out) and np.shares_memory(a_flat, a_out)
-                buf.set_res(0, memoryview(x_flat))
-                buf.set_res(1, memoryview(a_flat))
+                for a, blk in zip(arrays, padded, strict=True):
+                    blk[:n] = a[start:stop]
+                    blk[n:] = a[stop - 1]
                 x_in[:] = x
                 run()
                 if buf.ret() != 0:
                     raise RuntimeError(f"{function.name()} failed in the chunk starting at "
                                        f"step {start}")
-                x = x_out[n - 1].copy()
-                yield start, stop, x_out, a_out
+                aux[start:stop] = scratch_a[:n]
+                if xs is not None:
+                    xs[start:stop] = scratch_x[:n]
+                x = scratch_x[n - 1].copy()
+        return x
+
+
+def _compiled_loop(step: ca.Function, backend: str) -> CompiledLoop | None:
+    """The step compiled with its loop, or None for the VM (asked for, or no
+    working compiler under ``auto``)."""
+    if backend == "vm":
+        return None
+    cc = compiled.find_compiler()
+    if cc is None:
+        if backend == "compiled":
+            raise RuntimeError("no C compiler found for DYNPROP_BACKEND=compiled")
+        log.warning("no C compiler found; %s runs in the CasADi VM (slower, and its "
+                    "results differ from compiled ones in the last bits)", step.name())
+        return None
+    try:
+        return CompiledLoop(step, cc)
+    except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
+        if backend == "compiled":
+            raise
+        log.warning("compiling %s failed (%s); falling back to the CasADi VM", step.name(),
+                    exc)
+        return None
 
 
 def _buffer_of(cache, function):
@@ -231,6 +210,7 @@ def _buffer_of(cache, function):
 
 
 def _as_rows(inputs: list[np.ndarray]) -> list[np.ndarray]:
-    """Each input as (N, k) float rows; a strided view stays a view (``_chunks``
-    copies it a chunk at a time)."""
-    return [np.asarray(a, dtype=float).reshape(len(a), -1) for a in inputs]
+    """Each input as (N, k) float rows; a strided view stays a view (the compiled
+    loop reads it with its stride, the VM copies it a chunk at a time)."""
+    arrays = [np.asarray(a, dtype=float) for a in inputs]
+    return [a.reshape(len(a), int(np.prod(a.shape[1:]))) for a in arrays]

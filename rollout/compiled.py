@@ -68,18 +68,24 @@ def compile_function_path(f: ca.Function, backend: str | None = None
         return f, "vm", None
     gen = ca.CodeGenerator(f"{f.name()}.c", {"with_header": False})
     gen.add(f)
-    source = gen.dump()
-    key = hashlib.sha256("\n".join([source, cc, *CFLAGS, ca.__version__]).encode())
-    so_path = cache_dir() / f"{f.name()}_{key.hexdigest()[:20]}.so"
     try:
-        if not so_path.exists():
-            _build(source, cc, so_path)
+        so_path = cached_library(f.name(), gen.dump(), cc)
         return ca.external(f.name(), str(so_path)), "compiled", so_path
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         if backend == "compiled":
             raise
         log.warning("compiling %s failed (%s); falling back to the CasADi VM", f.name(), exc)
         return f, "vm", None
+
+
+def cached_library(name: str, source: str, cc: str) -> Path:
+    """The shared library of C ``source``, compiled once per machine: its path in
+    the cache, keyed by the source, the compiler and its flags."""
+    key = hashlib.sha256("\n".join([source, cc, *CFLAGS, ca.__version__]).encode())
+    so_path = cache_dir() / f"{name}_{key.hexdigest()[:20]}.so"
+    if not so_path.exists():
+        _build(source, cc, so_path)
+    return so_path
 
 
 def _build(source: str, cc: str, so_path: Path) -> None:
