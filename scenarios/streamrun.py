@@ -29,7 +29,7 @@ from .outputs import assemble_summary, eq55_sigma_yaw_deg, estimate_columns, wri
 from .schema import Scenario, output_writes_telemetry
 from .stream import DAY_S, producer, windows_of
 from .trim_loop import loop_summary
-from .workers import ignore_sigint, sigint_held
+from .workers import blas_one_thread, ignore_sigint, sigint_held
 
 QUEUE_ITEMS = 4   # two windows: a real and a twin record each
 LOG_EVERY_DAYS = 10
@@ -113,6 +113,7 @@ class Progress:
             self.bar.close()
 
 
+@blas_one_thread()   # the producer, forked inside, inherits the limit
 def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
                         window_samples: int | None = None, processes: int = 2,
                         progress: bool = True) -> dict:

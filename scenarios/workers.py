@@ -68,3 +68,18 @@ def worker_pool(workers: int, context) -> Iterator[ProcessPoolExecutor]:
             p.join()
         raise
     pool.shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def blas_one_thread() -> Iterator[None]:
+    """BLAS (numpy's and scipy's OpenBLAS) on one thread meanwhile.
+
+    dynprop keeps both cores busy with its own processes and threads; the BLAS calls
+    it makes are small (9×9 solves, N×3 products).  OpenBLAS would start a thread
+    per core for the larger ones and leave them spinning after each call, taking a
+    core from the other process: 13% of a long run's CPU.  One thread computes the
+    same values here (every run directory stayed byte-identical)."""
+    import scipy.linalg  # noqa: F401 - loads scipy's OpenBLAS, so it is limited too
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
