@@ -200,36 +200,47 @@ def _biased(x: np.ndarray, bias: float) -> np.ndarray:
     return x + bias if bias else x
 
 
-def earth_sensor(roll_rad, pitch_rad, spec: EarthSensor, rng, noise_enabled=True):
-    """Quantised, noisy roll and pitch (rad): Q(true + bias + noise), in degrees."""
+def earth_sensor(roll_rad, pitch_rad, spec: EarthSensor, rng, noise_enabled=True,
+                 out: tuple[np.ndarray, np.ndarray] | None = None):
+    """Quantised, noisy roll and pitch (rad): Q(true + bias + noise), in degrees.
+    With ``out`` (two arrays) they are written there."""
     n = len(roll_rad)
     e = _noise(rng, (n, 2), spec.noise_deg, noise_enabled)
     q = spec.quantum_deg
     roll = _biased(np.asarray(roll_rad) / DEG, spec.roll_bias_deg)
     pitch = _biased(np.asarray(pitch_rad) / DEG, spec.pitch_bias_deg)
-    return quantize(roll + e[:, 0], q) * DEG, quantize(pitch + e[:, 1], q) * DEG
+    out = out or (None, None)
+    return (np.multiply(quantize(roll + e[:, 0], q), DEG, out=out[0]),
+            np.multiply(quantize(pitch + e[:, 1], q), DEG, out=out[1]))
 
 
-def tachometers(speeds_radps, spec: Tachometer, rng, noise_enabled=True) -> np.ndarray:
+def tachometers(speeds_radps, spec: Tachometer, rng, noise_enabled=True,
+                out: np.ndarray | None = None) -> np.ndarray:
     """Quantised, noisy wheel speeds (rad/s), one column per wheel: Q(true + bias + noise),
-    in rpm."""
+    in rpm (written into ``out`` if given)."""
     speeds = np.asarray(speeds_radps)
     e = _noise(rng, speeds.shape, spec.noise_3sigma_rpm / 3.0, noise_enabled)
-    return quantize(_biased(speeds / RPM, spec.bias_rpm) + e, spec.quantum_rpm) * RPM
+    return np.multiply(quantize(_biased(speeds / RPM, spec.bias_rpm) + e, spec.quantum_rpm),
+                       RPM, out=out)
 
 
-def sun_sensors(sun_body: np.ndarray, lit: np.ndarray, heads, rngs, noise_enabled=True
-                ) -> SunReadings:
-    """Readings of every head from the true Sun direction in body axes.
+def sun_sensors(sun_body: np.ndarray, lit: np.ndarray, heads, rngs, noise_enabled=True,
+                out: SunReadings | None = None) -> SunReadings:
+    """Readings of every head from the true Sun direction in body axes (written into
+    ``out``'s arrays if given).
 
     A head sees the Sun when the Sun is in front of it, within both field-of-view
     half angles, and not eclipsed (``lit``); both tests use the true angles.  Each
     reading is Q(true + bias + noise), in degrees.
     """
     n = len(sun_body)
-    visible = np.zeros((n, len(heads)), dtype=bool)
-    alpha = np.full((n, len(heads)), np.nan)
-    beta = np.full((n, len(heads)), np.nan)
+    if out is None:
+        out = SunReadings(np.empty((n, len(heads)), dtype=bool),
+                          np.empty((n, len(heads))), np.empty((n, len(heads))))
+    visible, alpha, beta = out.visible, out.alpha_rad, out.beta_rad
+    visible.fill(False)
+    alpha.fill(np.nan)
+    beta.fill(np.nan)
     for k, head in enumerate(heads):
         b, u, y = head.axes
         # Drawn for every sample, seen or not, so the stream never shifts.
@@ -250,4 +261,4 @@ def sun_sensors(sun_body: np.ndarray, lit: np.ndarray, heads, rngs, noise_enable
         b_deg = _biased(b_true / DEG, head.out_of_plane_bias_deg)
         alpha[idx, k] = quantize(a_deg + sigma * e[idx, 0], q) * DEG
         beta[idx, k] = quantize(b_deg + sigma * e[idx, 1], q) * DEG
-    return SunReadings(visible, alpha, beta)
+    return out

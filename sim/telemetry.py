@@ -71,8 +71,11 @@ def select_head(sun: SunReadings, heads) -> np.ndarray:
 
 
 def derive_yaw(sun: SunReadings, heads, roll_rad, pitch_rad, sun_orbit_frame,
-               min_sun_separation_deg: float = MIN_SUN_SEPARATION_DEG) -> tuple[np.ndarray, ...]:
-    """Ground yaw (rad), its a-priori σ (rad) and the head used, per sample.
+               min_sun_separation_deg: float = MIN_SUN_SEPARATION_DEG,
+               out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+               ) -> tuple[np.ndarray, ...]:
+    """Ground yaw (rad), its a-priori σ (rad) and the head used, per sample (written
+    into ``out``'s three arrays if given).
 
     Only samples that can have a yaw (a head sees the Sun, the Sun is far enough
     from the yaw axis) are computed; the rest stay NaN / −1.
@@ -80,10 +83,12 @@ def derive_yaw(sun: SunReadings, heads, roll_rad, pitch_rad, sun_orbit_frame,
     n = len(roll_rad)
     s_r = np.asarray(sun_orbit_frame)
     sep_sin = np.hypot(s_r[:, 0], s_r[:, 1])  # sine of the Sun's angle from the yaw axis
-    head_idx = select_head(sun, heads)
+    yaw, sigma, head_idx = out if out is not None else (np.empty(n), np.empty(n),
+                                                        np.empty(n, dtype=np.intp))
+    head_idx[:] = select_head(sun, heads)
     head_idx[sep_sin < np.sin(min_sun_separation_deg * DEG)] = -1
-    yaw = np.full(n, np.nan)
-    sigma = np.full(n, np.nan)
+    yaw.fill(np.nan)
+    sigma.fill(np.nan)
     for j, head in enumerate(heads):
         use = np.flatnonzero(head_idx == j)
         if use.size == 0:
@@ -105,51 +110,50 @@ def derive_yaw(sun: SunReadings, heads, roll_rad, pitch_rad, sun_orbit_frame,
 
 
 def make_telemetry(truth, suite: SensorSuite, rngs,
-                   min_sun_separation_deg: float = MIN_SUN_SEPARATION_DEG) -> Telemetry:
+                   min_sun_separation_deg: float = MIN_SUN_SEPARATION_DEG,
+                   out: Telemetry | None = None) -> Telemetry:
     """Sense a ``sim.truth.TruthResult`` with ``suite``; ``rngs`` maps each of
-    ``suite.stream_names()`` to its own generator."""
+    ``suite.stream_names()`` to its own generator.  With ``out`` (``TelemetryRows``'
+    views of a piece) every reading is written there, and ``out`` returned."""
     on = suite.noise_enabled
-    roll, pitch = earth_sensor(truth.roll_rad, truth.pitch_rad, suite.earth, rngs["earth"], on)
-    speeds = tachometers(truth.wheel_speeds_radps, suite.tachometer, rngs["tachometer"], on)
+    if out is not None:
+        out.t_s[:] = truth.t_s
+    roll, pitch = earth_sensor(truth.roll_rad, truth.pitch_rad, suite.earth, rngs["earth"], on,
+                               None if out is None else (out.roll_rad, out.pitch_rad))
+    speeds = tachometers(truth.wheel_speeds_radps, suite.tachometer, rngs["tachometer"], on,
+                         None if out is None else out.wheel_speeds_radps)
     # Half the solar disc hidden counts as lost: the heads need the Sun's centroid.
-    sun = sun_sensors(truth.sun_body, truth.shadow >= 0.5, suite.sun_heads, rngs, on)
-    yaw, sigma, head = derive_yaw(sun, suite.sun_heads, roll, pitch, truth.sun_orbit_frame,
-                                  min_sun_separation_deg)
-    return Telemetry(truth.t_s, roll, pitch, yaw, sigma, head, speeds, sun)
+    sun = sun_sensors(truth.sun_body, truth.shadow >= 0.5, suite.sun_heads, rngs, on,
+                      None if out is None else out.sun)
+    yaw, sigma, head = derive_yaw(
+        sun, suite.sun_heads, roll, pitch, truth.sun_orbit_frame, min_sun_separation_deg,
+        None if out is None else (out.yaw_rad, out.yaw_sigma_rad, out.yaw_head))
+    return out if out is not None else Telemetry(truth.t_s, roll, pitch, yaw, sigma, head,
+                                                 speeds, sun)
 
 
 class TelemetryRows:
-    """A window's telemetry gathered piece by piece as it is sensed (``put``), into
-    arrays of the whole window, so the joining is done while the truth still rolls
-    out rather than all at once after it."""
+    """A window's telemetry, sensed piece by piece straight into arrays of the whole
+    window (``rows`` hands ``make_telemetry`` a piece's views): nothing is joined
+    after the rollout, and no piece is copied."""
 
-    _FIELDS = ("t_s", "roll_rad", "pitch_rad", "yaw_rad", "yaw_sigma_rad", "yaw_head",
-               "wheel_speeds_radps")
+    def __init__(self, n: int, n_heads: int, n_wheels: int):
+        self.window = Telemetry(
+            np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+            np.empty(n, dtype=np.intp), np.empty((n, n_wheels)),
+            SunReadings(np.empty((n, n_heads), dtype=bool), np.empty((n, n_heads)),
+                        np.empty((n, n_heads))))
 
-    def __init__(self, n: int):
-        self.n = n
-        self.only: Telemetry | None = None   # a single piece spanning the window
-        self.arrays: dict[str, np.ndarray] | None = None
-
-    def put(self, tel: Telemetry, lo: int, hi: int) -> None:
-        if lo == 0 and hi == self.n:
-            self.only = tel
-            return
-        parts = {**{f: getattr(tel, f) for f in self._FIELDS},
-                 **{f"sun.{f}": getattr(tel.sun, f) for f in ("visible", "alpha_rad",
-                                                             "beta_rad")}}
-        if self.arrays is None:
-            self.arrays = {k: np.empty((self.n, *v.shape[1:]), v.dtype)
-                           for k, v in parts.items()}
-        for k, v in parts.items():
-            self.arrays[k][lo:hi] = v
+    def rows(self, lo: int, hi: int) -> Telemetry:
+        """Views of samples lo … hi−1 of the window's arrays."""
+        w, cut = self.window, slice(lo, hi)
+        return Telemetry(w.t_s[cut], w.roll_rad[cut], w.pitch_rad[cut], w.yaw_rad[cut],
+                         w.yaw_sigma_rad[cut], w.yaw_head[cut], w.wheel_speeds_radps[cut],
+                         SunReadings(w.sun.visible[cut], w.sun.alpha_rad[cut],
+                                     w.sun.beta_rad[cut]))
 
     def telemetry(self) -> Telemetry:
-        if self.only is not None:
-            return self.only
-        a = self.arrays
-        sun = SunReadings(a["sun.visible"], a["sun.alpha_rad"], a["sun.beta_rad"])
-        return Telemetry(*(a[f] for f in self._FIELDS), sun)
+        return self.window
 
 
 def sense_window(stream, a: int, b: int, suite: SensorSuite, rngs, pool,
@@ -159,11 +163,12 @@ def sense_window(stream, a: int, b: int, suite: SensorSuite, rngs, pool,
     sensed a piece at a time behind the rollout (``TruthStream.window(sense=...)``).
     Returns the truth, the telemetry and the draws (``sensors.draw_ahead``), which a
     second sensing of the same samples can read again."""
-    drawn = pool.submit(draw_ahead, suite, rngs, b - a, stream.spacecraft.n_wheels)
-    gathered = TelemetryRows(b - a)
+    n_wheels = stream.spacecraft.n_wheels
+    drawn = pool.submit(draw_ahead, suite, rngs, b - a, n_wheels)
+    gathered = TelemetryRows(b - a, len(suite.sun_heads), n_wheels)
 
     def sense(rows, lo, hi) -> None:
-        gathered.put(make_telemetry(rows, suite, drawn_rows(drawn.result(), lo, hi),
-                                    min_sun_separation_deg), lo, hi)
+        make_telemetry(rows, suite, drawn_rows(drawn.result(), lo, hi),
+                       min_sun_separation_deg, gathered.rows(lo, hi))
     truth, _ = stream.window(a, b, sense=sense)
     return truth, gathered.telemetry(), drawn.result()

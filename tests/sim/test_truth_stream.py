@@ -16,7 +16,7 @@ import pytest
 from sim.control import Control
 from sim.environment import Environment
 from sim.frames import GeoOrbit
-from sim.sensors import SensorSuite, draw_ahead
+from sim.sensors import SensorSuite, draw_ahead, drawn_rows
 from sim.spacecraft import goes_next
 from sim.telemetry import TelemetryRows, make_telemetry
 from sim.truth import TORQUE_SOURCES, InitialState, TruthResult, TruthStream
@@ -149,19 +149,25 @@ def test_sensing_behind_the_rollout_gives_the_whole_runs_truth_and_telemetry(who
     carried = rngs()
     stream = _stream()
     spans = []
+    # Also sensed a second time, from the same draws made ahead, straight into the
+    # window's arrays (sense_window's way): uninitialised memory must not show through.
+    n_wheels = stream.spacecraft.n_wheels
+    drawn = draw_ahead(suite, rngs(), stream.n_samples, n_wheels)
+    gathered = TelemetryRows(stream.n_samples, len(suite.sun_heads), n_wheels)
+    for a in (gathered.window.roll_rad, gathered.window.sun.alpha_rad):
+        a.fill(7.0)
 
     def sense(rows, lo, hi):
         spans.append((lo, hi))
         assert np.array_equal(rows.t_s, whole.t_s[lo:hi])
+        into = gathered.rows(lo, hi)
+        assert make_telemetry(rows, suite, drawn_rows(drawn, lo, hi), out=into) is into
         return make_telemetry(rows, suite, carried)
     truth, pieces = stream.window(0, stream.n_samples, sense=sense, piece=1063)
     assert _equal_fields(whole, truth) == []
     assert spans[0] == (0, 1063) and spans[-1][1] == stream.n_samples
     one = make_telemetry(whole, suite, rngs())
     _assert_same_telemetry(one, pieces)
-    gathered = TelemetryRows(stream.n_samples)
-    for tel, (lo, hi) in zip(pieces, spans, strict=True):
-        gathered.put(tel, lo, hi)
     _assert_same_telemetry(one, [gathered.telemetry()])
     assert stream.next_start == stream.n_samples
 
