@@ -47,11 +47,12 @@ class Telemetry:
         return self.sun.visible.any(axis=1)
 
 
-def _angle_sigma_rad(head, alpha, beta) -> np.ndarray:
-    """1σ of one measured angle: noise (CASS: growing off boresight) and quantisation."""
-    noise = np.full(alpha.shape, head.noise_deg)
+def _angle_sigma_rad(head, tan_alpha, tan_beta) -> np.ndarray:
+    """1σ of one measured angle: noise (CASS: growing off boresight) and quantisation,
+    from the tangents of the measured angles."""
+    noise = np.full(tan_alpha.shape, head.noise_deg)
     if head.kind == "cass":
-        cos_off = 1.0 / np.sqrt(1.0 + np.tan(alpha) ** 2 + np.tan(beta) ** 2)
+        cos_off = 1.0 / np.sqrt(1.0 + tan_alpha ** 2 + tan_beta ** 2)
         noise = head.noise_deg / np.maximum(cos_off, 1e-3)
     return np.sqrt(noise**2 + head.quantum_deg**2 / 12.0) * DEG
 
@@ -94,18 +95,21 @@ def derive_yaw(sun: SunReadings, heads, roll_rad, pitch_rad, sun_orbit_frame,
         if use.size == 0:
             continue
         b, u, y = head.axes
-        alpha, beta = sun.alpha_rad[use, j], sun.beta_rad[use, j]
-        v = b + np.tan(alpha)[:, None] * u + np.tan(beta)[:, None] * y
-        s_meas = v / np.linalg.norm(v, axis=1, keepdims=True)
+        ta, tb = np.tan(sun.alpha_rad[use, j]), np.tan(sun.beta_rad[use, j])
+        # ŝ = v/|v| with v = b + tan α u + tan β y, a component at a time (contiguous
+        # arrays; the same operations, in the same order, as on (n, 3) rows).
+        v = [b[k] + ta * u[k] + tb * y[k] for k in range(3)]
+        norm = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        s0, s1, s2 = (c / norm for c in v)
         # Undo pitch then roll (measured): w = R2(θ)ᵀ ŝ, then the x–y part of R1(φ)ᵀ w.
         cp, sp = np.cos(pitch_rad[use]), np.sin(pitch_rad[use])
         cr, sr = np.cos(roll_rad[use]), np.sin(roll_rad[use])
-        wx = cp * s_meas[:, 0] + sp * s_meas[:, 2]
-        wz = -sp * s_meas[:, 0] + cp * s_meas[:, 2]
-        vy = cr * s_meas[:, 1] - sr * wz
+        wx = cp * s0 + sp * s2
+        wz = -sp * s0 + cp * s2
+        vy = cr * s1 - sr * wz
         psi = np.arctan2(s_r[use, 1], s_r[use, 0]) - np.arctan2(vy, wx)
         yaw[use] = (psi + np.pi) % (2 * np.pi) - np.pi
-        sigma[use] = _angle_sigma_rad(head, alpha, beta) / sep_sin[use]
+        sigma[use] = _angle_sigma_rad(head, ta, tb) / sep_sin[use]
     return yaw, sigma, head_idx
 
 
