@@ -1,5 +1,5 @@
 """The extended Kalman filter on the full nonlinear model (``ekf_model``), beside the
-paper's linear one (``kalman``): the same telemetry, the same chunked compiled
+paper's linear one (``kalman``): the same telemetry, the same compiled
 rollout, results in the paper's coordinates so every comparison applies to both.
 
 Each step, at t_k: sequential scalar updates of roll, pitch, yaw and h, all

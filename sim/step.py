@@ -1,4 +1,4 @@
-"""The truth model's RK4 step, its parameter vector, and the chunked rollout.
+"""The truth model's RK4 step and its parameter vector (rolled out by ``rollout``).
 
 One symbolic step is built per wheel count and reused for every scenario:
 everything that differs between runs (inertia, gains, switches, Δt) enters as a

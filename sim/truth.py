@@ -1,10 +1,10 @@
-"""Truth simulation: exogenous inputs, the chunked compiled rollout, and its result.
+"""Truth simulation: exogenous inputs, the compiled rollout, and its result.
 
 ``simulate_truth`` is the public entry point.  It evaluates the slowly varying
 inputs (Sun, shadow, field) on the whole output grid with vectorised numpy,
 draws the wheel ripple from the caller's generator, and rolls the compiled RK4
-step out in ``mapaccum`` chunks through ``Function.buffer()``: one Python call
-per few thousand steps, none per step.
+step out (``rollout``: a C loop over the step, or ``mapaccum`` chunks in the VM):
+one Python call per piece of thousands of steps, none per step.
 """
 
 from __future__ import annotations
