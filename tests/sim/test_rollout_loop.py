@@ -110,3 +110,20 @@ def test_no_compiler_means_the_vm(monkeypatch):
     assert np.array_equal(aux[:, 0], states[:-1, 0])
     with pytest.raises(RuntimeError, match="compiler"):
         ChunkedRollout(step, backend="compiled")
+
+
+def test_a_compiler_that_fails_means_the_vm(monkeypatch, tmp_path, caplog):
+    """Under ``auto`` a compiler that fails leaves the step in the VM, says so, and
+    leaves no library behind; under ``compiled`` it is an error."""
+    monkeypatch.setenv("DYNPROP_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled, "find_compiler", lambda: "/bin/false")
+    x, u, q = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("p")
+    step = ca.Function("halve_bad_cc", [x, u, q], [0.5 * x + u, x])
+    with caplog.at_level("WARNING"):
+        engine = ChunkedRollout(step, chunk=4, tail=2, backend="auto")
+    assert engine.backend == "vm" and "falling back to the CasADi VM" in caplog.text
+    assert not list(tmp_path.glob("*.so"))
+    states, _ = engine.run(np.array([8.0]), [np.ones(3)], np.zeros(1))
+    assert np.array_equal(states[:, 0], [8.0, 5.0, 3.5, 2.75])
+    with pytest.raises(RuntimeError):
+        ChunkedRollout(step, backend="compiled")
