@@ -180,14 +180,8 @@ class ChunkedRollout:
 def _compiled_loop(step: ca.Function, backend: str) -> CompiledLoop | None:
     """The step compiled with its loop, or None for the VM (asked for, or no
     working compiler under ``auto``)."""
-    if backend == "vm":
-        return None
-    cc = compiled.find_compiler()
+    cc = compiled.compiler_for(backend, step.name())
     if cc is None:
-        if backend == "compiled":
-            raise RuntimeError("no C compiler found for DYNPROP_BACKEND=compiled")
-        log.warning("no C compiler found; %s runs in the CasADi VM (slower, and its "
-                    "results differ from compiled ones in the last bits)", step.name())
         return None
     try:
         return CompiledLoop(step, cc)

@@ -47,6 +47,20 @@ def requested_backend() -> str:
     return backend
 
 
+def compiler_for(backend: str, name: str) -> str | None:
+    """The C compiler to build ``name`` with, or None for the VM: asked for, or no
+    compiler found under ``auto`` (said in a warning; under ``compiled``, an error)."""
+    if backend == "vm":
+        return None
+    cc = find_compiler()
+    if cc is None:
+        if backend == "compiled":
+            raise RuntimeError("no C compiler found for DYNPROP_BACKEND=compiled")
+        log.warning("no C compiler found; %s runs in the CasADi VM (slower, and its "
+                    "results differ from compiled ones in the last bits)", name)
+    return cc
+
+
 def compile_function(f: ca.Function, backend: str | None = None) -> tuple[ca.Function, str]:
     """Return ``(function, backend_used)`` where backend_used is 'compiled' or 'vm'."""
     function, used, _ = compile_function_path(f, backend)
@@ -57,14 +71,8 @@ def compile_function_path(f: ca.Function, backend: str | None = None
                           ) -> tuple[ca.Function, str, Path | None]:
     """``compile_function``, and the library's path (None in the VM)."""
     backend = backend or requested_backend()
-    if backend == "vm":
-        return f, "vm", None
-    cc = find_compiler()
+    cc = compiler_for(backend, f.name())
     if cc is None:
-        if backend == "compiled":
-            raise RuntimeError("no C compiler found for DYNPROP_BACKEND=compiled")
-        log.warning("no C compiler found; %s runs in the CasADi VM (slower, and its "
-                    "results differ from compiled ones in the last bits)", f.name())
         return f, "vm", None
     gen = ca.CodeGenerator(f"{f.name()}.c", {"with_header": False})
     gen.add(f)
