@@ -56,7 +56,7 @@ from .pipeline import (
 )
 from .schema import Scenario, output_stride
 from .trim_loop import TrimLoop
-from .twin_stream import TwinFilter, lighten_twin, nees_rows, padded_inputs, twin_window
+from .twin_stream import TwinFilter, padded_inputs, twin_window
 
 DAY_S = 86400.0
 SINGLE_WINDOW_S = 2 * DAY_S
@@ -248,41 +248,33 @@ class Demux:
         return self.twins.pop(index)
 
 
-def filtered(s: Scenario, records, names=("real", "linear")):
-    """The filters ``names`` ("real" on ``meas``, "linear" on ``twin_meas``) over each
-    window, each continuing from the prior the previous window ended with.  Adds
-    the FilterResult under its name and its inputs (u, extra) as ``<name>_in``."""
+def filtered(s: Scenario, records):
+    """The paper's filter on ``meas`` over each window, continuing from the prior the
+    previous window ended with (and the EKF beside it when the scenario asks).  Adds
+    the FilterResult as ``real`` and its inputs (u, extra) as ``real_in``.  The twin
+    is filtered in its own process (``twin_stream.TwinFilter``)."""
     plan = next(records)
     yield plan
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
-    x0, P0 = initial_prior(s, params)
-    keys = {"real": "meas", "linear": "twin_meas"}
-    priors = {name: (x0, P0) for name in names}
+    prior = initial_prior(s, params)
     ekf = EkfStream(s, params) if "ekf" in s.estimator.filters else None
     prev, cur = None, next(records, None)
     while cur is not None:
         # The last window needs no look-ahead (and waiting for the stream's end would
         # hold it up until the producer is done with its files).
         nxt = None if cur["index"] == len(plan.bounds) - 1 else next(records, None)
-        for name in names:
-            meas, u, extra = padded_inputs(s, params, plan, prev, cur, nxt, keys[name])
-            # The twin's covariance only where its NEES is formed (lighten_twin).
-            rows = nees_rows(cur) if name == "linear" else None
-            result = kalman_filter(meas, disc, *priors[name], u=u, extra=extra,
-                                   covariance_rows=rows)
-            priors[name] = (result.x_next, result.P_next)
-            cur[name], cur[f"{name}_in"] = result, (u, extra)
-        if ekf is not None and "real" in names:
+        meas, u, extra = padded_inputs(s, params, plan, prev, cur, nxt, "meas")
+        result = kalman_filter(meas, disc, *prior, u=u, extra=extra)
+        prior = (result.x_next, result.P_next)
+        cur["real"], cur["real_in"] = result, (u, extra)
+        if ekf is not None:
             cur["ekf"] = ekf.window(plan, prev, cur, nxt)
         cur["params"] = params
         # The next window's derivative needs only the last samples of this one.
-        prev = {keys[name]: tuple(None if v is None else v[-plan.pad:]
-                                  for v in cur[keys[name]]) for name in names}
+        prev = {"meas": tuple(None if v is None else v[-plan.pad:] for v in cur["meas"])}
         if cur.get("pitch") is not None:
             prev["pitch"] = cur["pitch"][-plan.pad:]
-        if "linear" in names:
-            lighten_twin(cur)
         yield cur
         cur = nxt
 
@@ -350,7 +342,7 @@ def windows_of(s: Scenario, run: int = 0, window_samples: int | None = None,
     """The chained stages: the plan, then one fully processed record per window (the
     real filter and smoother, and the window's twin record merged in)."""
     demux = Demux(items if items is not None else producer(s, run, window_samples))
-    records = smoothed(s, filtered(s, demux.reals(), ("real",)), smooth)
+    records = smoothed(s, filtered(s, demux.reals()), smooth)
     yield next(records)
     for rec in records:
         rec.update(demux.twin(rec["index"]))
