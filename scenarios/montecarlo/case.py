@@ -23,6 +23,7 @@ from ..outputs import display_factors, sun_gaps
 from ..pipeline import run_scenario
 from ..runner import simulate
 from ..schema import Scenario
+from ..workers import blas_one_thread
 from .dispersions import UnphysicalDraw, draw_case
 
 RAD2DEG = 180.0 / np.pi
@@ -136,6 +137,7 @@ def full_arrays(runs) -> dict[str, np.ndarray]:
     return {k: (v if k == "t_s" else np.asarray(v, dtype=np.float32)) for k, v in out.items()}
 
 
+@blas_one_thread()   # a worker per core: OpenBLAS's spinning threads only took cores
 def run_case(s: Scenario, case: int, keep_full: bool = False) -> dict:
     """Draw, simulate, filter and reduce case ``case`` of the nominal scenario ``s``.
 
