@@ -78,8 +78,9 @@ def as_decimal_reading(values: np.ndarray, quantum: float) -> np.ndarray:
 
 
 def telemetry_lattices(suite, n_wheels: int) -> dict[str, float]:
-    """The reading quantum of each quantised column of ``telemetry_columns`` (its
-    values are ``as_decimal_reading``'s), for ``csvio``'s faster exact text."""
+    """The reading quantum of each quantised column of ``telemetry_columns``: the one
+    place that says which, for the columns themselves (``as_decimal_reading``) and
+    for ``csvio``'s faster exact text."""
     earth_q, tach_q = suite.earth.quantum_deg, suite.tachometer.quantum_rpm
     out = {"roll_deg": earth_q, "pitch_deg": earth_q, "sun_head": 1.0,
            **{f"wheel{i + 1}_rpm": tach_q for i in range(n_wheels)}}
@@ -98,20 +99,21 @@ def telemetry_columns(tel, suite) -> dict[str, np.ndarray]:
     head does not see the Sun).  Quantised readings are their decimal values
     (``as_decimal_reading``); the run's filter reads these very columns.
     """
-    earth_q, tach_q = suite.earth.quantum_deg, suite.tachometer.quantum_rpm
+    quantum = telemetry_lattices(suite, tel.wheel_speeds_radps.shape[1])
     cols = {
         "t_s": tel.t_s,
-        "roll_deg": as_decimal_reading(tel.roll_rad * RAD2DEG, earth_q),
-        "pitch_deg": as_decimal_reading(tel.pitch_rad * RAD2DEG, earth_q),
+        "roll_deg": as_decimal_reading(tel.roll_rad * RAD2DEG, quantum["roll_deg"]),
+        "pitch_deg": as_decimal_reading(tel.pitch_rad * RAD2DEG, quantum["pitch_deg"]),
         "yaw_deg": tel.yaw_rad * RAD2DEG,
     }
     for i in range(tel.wheel_speeds_radps.shape[1]):
-        cols[f"wheel{i + 1}_rpm"] = as_decimal_reading(
-            tel.wheel_speeds_radps[:, i] * RADPS2RPM, tach_q)
+        name = f"wheel{i + 1}_rpm"
+        cols[name] = as_decimal_reading(tel.wheel_speeds_radps[:, i] * RADPS2RPM,
+                                        quantum[name])
     cols["yaw_sigma_deg"] = tel.yaw_sigma_rad * RAD2DEG
     cols["sun_head"] = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
     for k, head in enumerate(suite.sun_heads):
         for angle, values in (("alpha", tel.sun.alpha_rad), ("beta", tel.sun.beta_rad)):
-            cols[f"{head.name}_{angle}_deg"] = as_decimal_reading(values[:, k] * RAD2DEG,
-                                                                  head.quantum_deg)
+            name = f"{head.name}_{angle}_deg"
+            cols[name] = as_decimal_reading(values[:, k] * RAD2DEG, quantum[name])
     return cols
