@@ -20,8 +20,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from dynprop.scenarios.loader import load_scenario  # noqa: E402
-from dynprop.scenarios.runner import simulate  # noqa: E402
+from dynprop.scenarios.config.loader import load_scenario  # noqa: E402
+from dynprop.scenarios.run.simulate import simulate  # noqa: E402
 from dynprop.sim.control import Control  # noqa: E402
 from dynprop.sim.environment import Environment  # noqa: E402
 from dynprop.sim.frames import GeoOrbit  # noqa: E402
@@ -117,7 +117,7 @@ def truth_day(model: TruthModel):
 def run_figures_2day_s() -> float:
     """The four `dynprop run` figures of the default two-day run, drawn and saved
     (two at a time, as `dynprop run` does), from its comparison.npz and telemetry."""
-    from dynprop.scenarios.plotting import plot_run_figures
+    from dynprop.scenarios.figures.run import plot_run_figures
     exe = str(Path(sys.executable).with_name("dynprop"))
     with tempfile.TemporaryDirectory() as tmp:
         run = Path(tmp) / "run"
@@ -130,7 +130,7 @@ def discretize_ms() -> float:
     """Φ, Γ and Q_d of the paper's model at 0.512 s (Eqs. 15–23, 31–32), the best of
     200 calls: the filter is rebuilt from these for every run and Monte Carlo case."""
     from dynprop.estimator.transition import discretize
-    from dynprop.scenarios.build import estimator_model
+    from dynprop.scenarios.config.build import estimator_model
     params, noise = estimator_model(load_scenario("goes_next_equinox"))
     discretize(params, noise, 0.512)
     times = []
@@ -147,8 +147,8 @@ def ekf_over_filter() -> float:
     from dynprop.estimator.ekf import EkfInputs, ekf_filter
     from dynprop.estimator.kalman import Measurements, kalman_filter
     from dynprop.estimator.transition import discretize
-    from dynprop.scenarios.build import estimator_model
-    from dynprop.scenarios.ekf_run import ekf_design
+    from dynprop.scenarios.config.build import estimator_model
+    from dynprop.scenarios.run.ekf import ekf_design
     scenario = load_scenario("goes_next_equinox", ["duration_s=86400"])
     params, noise = estimator_model(scenario)
     disc = discretize(params, noise, 0.512)
@@ -204,7 +204,7 @@ def main() -> None:
     # Issue 4: the filter over one day, roll and h every step, yaw two thirds of it.
     from dynprop.estimator.kalman import Measurements, dense_filter, kalman_filter
     from dynprop.estimator.transition import discretize
-    from dynprop.scenarios.build import estimator_model
+    from dynprop.scenarios.config.build import estimator_model
     params, noise = estimator_model(scenario)
     disc = discretize(params, noise, 0.512)
     n = 168_750
@@ -219,7 +219,7 @@ def main() -> None:
     # Issue 16: the extended Kalman filter on the same day, pitch measured like roll;
     # its target is a ratio to filter_s_per_day of the same bench run (≤ 4×).
     from dynprop.estimator.ekf import EkfInputs, ekf_filter
-    from dynprop.scenarios.ekf_run import ekf_design
+    from dynprop.scenarios.run.ekf import ekf_design
     pm, wn, X0, P0e = ekf_design(scenario)
     ekf_in = EkfInputs(
         np.column_stack([meas.roll_rad, rng.normal(0, 1.8e-4, n), yaw, meas.h_Nms]),

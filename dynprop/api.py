@@ -8,8 +8,8 @@ import json
 import tempfile
 from pathlib import Path
 
-from dynprop.scenarios.loader import ScenarioError
-from dynprop.scenarios.schema import Scenario
+from dynprop.scenarios.config.loader import ScenarioError
+from dynprop.scenarios.config.schema import Scenario
 
 from .results import (
     LinearizationResult,
@@ -41,7 +41,7 @@ def load_scenario(name_or_path: str | Path, set: dict | None = None, **overrides
 
 
 def _load(source, items: list[str]) -> Scenario:
-    from dynprop.scenarios.loader import load_scenario as load
+    from dynprop.scenarios.config.loader import load_scenario as load
     return load(source, items)
 
 
@@ -61,9 +61,9 @@ def simulate(scenario: Scenario | str) -> SimulationResult:
 
         sim = dynprop.simulate(s)
         sim.truth[["roll_deg", "yaw_deg"]].plot()"""
-    from dynprop.scenarios.rundir import staged_run_dir
-    from dynprop.scenarios.runner import simulate as sim
-    from dynprop.scenarios.runner import write_simulation
+    from dynprop.scenarios.files.rundir import staged_run_dir
+    from dynprop.scenarios.run.simulate import simulate as sim
+    from dynprop.scenarios.run.simulate import write_simulation
     s = _scenario(scenario)
     owner, out = _temporary("simulate")
     result = sim(s)
@@ -79,8 +79,8 @@ def run(scenario: Scenario | str) -> RunResult:
         r = dynprop.run(s)
         r.summary["yaw_error_at_gap_end_deg"], r.errors()["yaw_deg"].abs().max()
         r.figure("errors"); r.save("runs/eq")"""
-    from dynprop.scenarios.rundir import staged_run_dir
-    from dynprop.scenarios.runs import run_to_directory
+    from dynprop.scenarios.files.rundir import staged_run_dir
+    from dynprop.scenarios.run.estimate import run_to_directory
     s = _scenario(scenario)
     owner, out = _temporary("run")
     with staged_run_dir(out) as stage:
@@ -92,7 +92,7 @@ def open_run(path: str | Path):
     """A directory written by the CLI or by ``save``: a `run`/`estimate` directory
     as ``RunResult``, a Monte Carlo set as ``MonteCarloResult``, a `simulate` one as
     ``SimulationResult``.  The files are read in place."""
-    from dynprop.scenarios.rundir import RunDirError
+    from dynprop.scenarios.files.rundir import RunDirError
     path = Path(path)
     if (path / "montecarlo.json").is_file():
         return MonteCarloResult(path)
@@ -133,7 +133,7 @@ def linearization(scenario: Scenario | str) -> LinearizationResult:
 def observability(scenario: Scenario | str) -> TextReport:
     """Section 4's rank tables (`dynprop observability`)."""
     from dynprop.estimator.observability import format_rank_table
-    from dynprop.scenarios.build import estimator_model
+    from dynprop.scenarios.config.build import estimator_model
     params, _ = estimator_model(_scenario(scenario))
     return TextReport(format_rank_table(params))
 
@@ -142,7 +142,7 @@ def covariance(scenario: Scenario | str) -> TextReport:
     """Section 6's steady-state yaw σ by every method against the paper's 0.040°
     (`dynprop covariance`); ``.data`` is the report's dict."""
     from dynprop.estimator.covariance import covariance_report, format_covariance_report
-    from dynprop.scenarios.build import estimator_model, estimator_sensor_specs
+    from dynprop.scenarios.config.build import estimator_model, estimator_sensor_specs
     s = _scenario(scenario)
     params, noise = estimator_model(s)
     report = covariance_report(params, noise, estimator_sensor_specs(s))

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from dynprop.scenarios.csvio import read_csv
-from dynprop.scenarios.outputs import STATE_COLUMNS
-from dynprop.scenarios.rundir import staged_run_dir
+from dynprop.scenarios.files.csvio import read_csv
+from dynprop.scenarios.files.rundir import staged_run_dir
+from dynprop.scenarios.files.summary import STATE_COLUMNS
 
 
 def _table(path: Path) -> pd.DataFrame | None:
@@ -44,7 +44,7 @@ class _Directory:
     def save(self, out: str | Path, force: bool = False) -> Path:
         """Copy every file to ``out``: byte for byte what the command writes there.
         ``out`` must not exist unless ``force`` (then it is replaced whole)."""
-        from dynprop.scenarios.rundir import check_out_dir
+        from dynprop.scenarios.files.rundir import check_out_dir
         out = Path(out)
         check_out_dir(out, force)
         with staged_run_dir(out, force=force) as stage:
@@ -107,7 +107,7 @@ class RunResult(SimulationResult):
     def figure(self, name: str = "errors"):
         """A figure of the run as a matplotlib Figure, the drawing the CLI saves in
         plots/ ("errors", "consistency", "torques", "telemetry_overview", "season")."""
-        from dynprop.scenarios.plotting import run_figure
+        from dynprop.scenarios.figures.run import run_figure
         return run_figure(self.path, name)
 
 
@@ -126,7 +126,7 @@ class MonteCarloResult(_Directory):
         return pd.DataFrame(records).set_index("case") if records else pd.DataFrame()
 
     def figure(self, name: str = "mc_nees"):
-        from dynprop.scenarios.loader import load_scenario
+        from dynprop.scenarios.config.loader import load_scenario
         from dynprop.scenarios.montecarlo.runset import ensemble_figures
         summary = self.summary
         with np.load(self.path / "montecarlo.npz") as data:
@@ -154,8 +154,8 @@ class LinearizationResult:
         return render_markdown(self.report)
 
     def save(self, out: str | Path, force: bool = False) -> Path:
+        from dynprop.scenarios.files.rundir import check_out_dir
         from dynprop.scenarios.linearization.report import write_report
-        from dynprop.scenarios.rundir import check_out_dir
         out = Path(out)
         check_out_dir(out, force)
         with staged_run_dir(out, force=force) as stage:

@@ -137,7 +137,7 @@ LOOPLESS = ("simulate", "montecarlo", "linearization")   # they simulate without
 def load_with_overrides(args, streams: bool = False):
     """The scenario with --set, --seed and --duration-s applied (validated together).
     A command that holds whole arrays (``streams=False``) refuses runs over 30 days."""
-    from .loader import load_scenario
+    from .config.loader import load_scenario
     overrides = list(args.set)
     if args.seed is not None:
         overrides.append(f"seed={args.seed}")
@@ -156,8 +156,8 @@ def load_with_overrides(args, streams: bool = False):
 
 
 def _cmd_simulate(args) -> int:
-    from .rundir import check_out_dir, staged_run_dir
-    from .runner import simulate, write_simulation
+    from .files.rundir import check_out_dir, staged_run_dir
+    from .run.simulate import simulate, write_simulation
 
     scenario = load_with_overrides(args)
     check_out_dir(args.out, args.force)
@@ -175,8 +175,8 @@ def _cmd_simulate(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    from .rundir import check_out_dir, staged_run_dir
-    from .runs import run_to_directory
+    from .files.rundir import check_out_dir, staged_run_dir
+    from .run.estimate import run_to_directory
 
     scenario = load_with_overrides(args, streams=args.montecarlo_case is None)
     case = args.montecarlo_case
@@ -218,9 +218,9 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_estimate(args) -> int:
-    from .loader import load_scenario
-    from .rundir import check_out_dir, staged_run_dir
-    from .runs import estimate_inputs, estimate_to_directory
+    from .config.loader import load_scenario
+    from .files.rundir import check_out_dir, staged_run_dir
+    from .run.estimate import estimate_inputs, estimate_to_directory
 
     scenario = load_scenario(args.scenario)
     check_out_dir(args.out, args.force)
@@ -250,7 +250,7 @@ def _cmd_estimate(args) -> int:
 
 
 def _cmd_scenarios(args) -> int:
-    from .loader import bundled_names, load_scenario
+    from .config.loader import bundled_names, load_scenario
     names = bundled_names()
     width = max(map(len, names))
     for name in names:
@@ -259,7 +259,7 @@ def _cmd_scenarios(args) -> int:
 
 
 def _cmd_plot(args) -> int:
-    from .plotting import plot_run
+    from .figures.run import plot_run
     if (args.run_dir / "montecarlo.json").is_file():
         from .montecarlo.runset import redraw
         written = redraw(args.run_dir)
@@ -271,7 +271,7 @@ def _cmd_plot(args) -> int:
 
 
 def _cmd_trim(args) -> int:
-    from .trim_report import one_line, run_trim
+    from .trim.report import one_line, run_trim
     start = time.perf_counter()
     d = run_trim(args.run_dir, args.from_s, args.to_s, args.telemetry, args.verify)
     print(one_line(d))
@@ -283,7 +283,7 @@ def _cmd_trim(args) -> int:
 def _cmd_observability(args) -> int:
     from dynprop.estimator.observability import format_rank_table
 
-    from .build import estimator_model
+    from .config.build import estimator_model
     params, _ = estimator_model(load_with_overrides(args))
     print(format_rank_table(params))
     return 0
@@ -292,7 +292,7 @@ def _cmd_observability(args) -> int:
 def _cmd_covariance(args) -> int:
     from dynprop.estimator.covariance import covariance_report, format_covariance_report
 
-    from .build import estimator_model, estimator_sensor_specs
+    from .config.build import estimator_model, estimator_sensor_specs
     scenario = load_with_overrides(args)
     params, noise = estimator_model(scenario)
     print(format_covariance_report(covariance_report(params, noise,
@@ -314,8 +314,8 @@ def _reproduce_command(args, command: str | None = None, out: bool = True) -> st
 
 
 def _cmd_linearization(args) -> int:
+    from .files.rundir import check_out_dir, staged_run_dir
     from .linearization.report import build_report, write_report
-    from .rundir import check_out_dir, staged_run_dir
 
     scenario = load_with_overrides(args)
     check_out_dir(args.out, args.force)
@@ -370,10 +370,10 @@ COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd
 
 def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
-    from .loader import ScenarioError
+    from .config.loader import ScenarioError
+    from .files.rundir import RunDirError
     from .montecarlo import SchedulerError
-    from .rundir import RunDirError
-    from .trim import TrimError
+    from .trim.batch import TrimError
     try:
         return COMMANDS[args.command](args)
     except (InputError, RunDirError, ScenarioError, SchedulerError, TrimError) as exc:

@@ -15,12 +15,12 @@ from dynprop.estimator.consistency import chi2_bounds, fraction_inside, nees
 from dynprop.estimator.kalman import unpack
 from dynprop.estimator.model import N_STATES, R, Y
 
-from .. import build
-from ..ekf_run import run_ekf
-from ..outputs import nees_series, sun_gaps
-from ..pipeline import run_scenario
-from ..runner import simulate
-from ..schema import Scenario
+from ..config import build
+from ..config.schema import Scenario
+from ..files.summary import nees_series, sun_gaps
+from ..run.ekf import run_ekf
+from ..run.simulate import simulate
+from ..run.whole import run_scenario
 from .propagation import (
     DEG,
     SWEEP_DEG,

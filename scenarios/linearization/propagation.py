@@ -29,10 +29,10 @@ from dynprop.estimator.transition import discretize
 from dynprop.sim.linearize import linearize_about_nominal
 from scipy.linalg import expm
 
-from .. import build
-from ..loader import validate
-from ..pipeline import EXTERNAL, euler_rates, project_torques, propagate_linear, propagate_lti
-from ..schema import Scenario
+from ..config import build
+from ..config.loader import validate
+from ..config.schema import Scenario
+from ..run.whole import EXTERNAL, euler_rates, project_torques, propagate_linear, propagate_lti
 from .coefficients import eq11_matrices, model_matrices
 
 DEG = np.pi / 180.0

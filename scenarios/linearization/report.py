@@ -13,8 +13,9 @@ import numpy as np
 from dynprop.estimator.consistency import chi2_bounds
 from dynprop.estimator.model import N_STATES
 
-from .. import __version__, build
-from ..schema import Scenario
+from .. import __version__
+from ..config import build
+from ..config.schema import Scenario
 from .analysis import KINDS, run_budget, run_sweep, threshold_table
 from .coefficients import coefficient_section
 from .propagation import SWEEP_DEG, set_flags

@@ -18,11 +18,11 @@ from dynprop.estimator.consistency import nees
 from dynprop.estimator.kalman import unpack
 from dynprop.estimator.model import H_WHEEL, R, Y
 
-from ..columns import telemetry_columns
-from ..outputs import display_factors, sun_gaps
-from ..pipeline import run_scenario
-from ..runner import simulate
-from ..schema import Scenario
+from ..config.schema import Scenario
+from ..files.columns import telemetry_columns
+from ..files.summary import display_factors, sun_gaps
+from ..run.simulate import simulate
+from ..run.whole import run_scenario
 from ..workers import blas_one_thread
 from .dispersions import UnphysicalDraw, draw_case
 
@@ -120,8 +120,8 @@ def other_filters(s: Scenario, cols: dict, rows=None) -> dict:
     columns, their histories at ``rows`` (all samples if None)."""
     if "ekf" not in s.estimator.filters:
         return {}
-    from ..ekf_run import run_ekf
-    from ..pipeline import DEG, telemetry_inputs
+    from ..run.ekf import run_ekf
+    from ..run.whole import DEG, telemetry_inputs
     roll, yaw, speeds, sigma, head = telemetry_inputs(s, cols)
     return {"ekf": run_ekf(s, roll, cols["pitch_deg"] * DEG, yaw, speeds, sigma, head,
                            rows=rows)}

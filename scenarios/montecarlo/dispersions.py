@@ -15,10 +15,10 @@ from datetime import timedelta
 import numpy as np
 from dynprop.sim.ephemeris import parse_epoch
 
-from ..build import DISPERSION_STREAM
-from ..loader import ScenarioError, validate
-from ..schema import Scenario
-from .schema import Normal, Uniform
+from ..config.build import DISPERSION_STREAM
+from ..config.loader import ScenarioError, validate
+from ..config.montecarlo import Normal, Uniform
+from ..config.schema import Scenario
 
 
 def key_rng(seed: int, case: int, key: str) -> np.random.Generator:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..schema import Scenario
+from ..config.schema import Scenario
 from .execute import connect, default_workers, run_dask, run_local
 from .stats import ensemble, quantile_label, runs_to_bound_quantile
 from .store import SetDirectory, atomic_write, npz_bytes
@@ -68,7 +68,7 @@ def write_results(s: Scenario, store: SetDirectory, n_runs: int, command: str) -
 def redraw(out: Path) -> list[Path]:
     """`dynprop plot` on a set directory: the figures again from montecarlo.json and
     montecarlo.npz, without touching a case."""
-    from ..loader import load_scenario
+    from ..config.loader import load_scenario
     out = Path(out)
     s = load_scenario(out / "scenario.yaml")
     summary = json.loads((out / "montecarlo.json").read_text())
@@ -101,7 +101,7 @@ def ensemble_figures(s: Scenario, summary: dict, fig: dict, command: str) -> dic
 
 
 def draw_figures(plots: Path, s: Scenario, summary: dict, fig: dict, command: str) -> None:
-    from ..plotting import save_figure
+    from ..figures.run import save_figure
     plots.mkdir(exist_ok=True)
     for name, f in ensemble_figures(s, summary, fig, command).items():
         save_figure(f, plots / name)

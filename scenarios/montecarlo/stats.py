@@ -23,9 +23,9 @@ from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 from scipy import stats as sps
 
 from .. import __version__
-from ..build import estimator_model
-from ..outputs import STATE_COLUMNS, eq55_sigma_yaw_deg
-from ..schema import Scenario
+from ..config.build import estimator_model
+from ..config.schema import Scenario
+from ..files.summary import STATE_COLUMNS, eq55_sigma_yaw_deg
 
 RAD2DEG = 180.0 / np.pi
 # |e| quantiles that a Gaussian puts at 1σ, 2σ and 3σ (the keys of montecarlo.json

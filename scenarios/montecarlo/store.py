@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..loader import resolved_yaml
-from ..rundir import RunDirError, check_out_dir
-from ..schema import Scenario
+from ..config.loader import resolved_yaml
+from ..config.schema import Scenario
+from ..files.rundir import RunDirError, check_out_dir
 
 SCENARIO_FILE = "scenario.yaml"
 

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.comparison import comparison_arrays
-from scenarios.loader import load_scenario, resolved_yaml
-from scenarios.plotting import RUN_FIGURES, figure_set, plot_run
+from scenarios.config.loader import load_scenario, resolved_yaml
+from scenarios.figures.run import RUN_FIGURES, figure_set, plot_run
+from scenarios.files.comparison import comparison_arrays
 
 N = 4000
 DT = 0.512

@@ -16,7 +16,7 @@ import numpy as np
 from scipy import stats
 
 from scenarios.cli import main
-from scenarios.loader import load_scenario
+from scenarios.config.loader import load_scenario
 
 DYNPROP = Path(sys.executable).with_name("dynprop")
 DT = 0.512

@@ -13,8 +13,14 @@ import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.csvio import write_csv
-from scenarios.loader import MAX_PROBLEM_LINES, ScenarioError, closest, load_scenario, validate
+from scenarios.config.loader import (
+    MAX_PROBLEM_LINES,
+    ScenarioError,
+    closest,
+    load_scenario,
+    validate,
+)
+from scenarios.files.csvio import write_csv
 
 
 def run_cli(capsys, *argv: str) -> tuple[int, str, str]:

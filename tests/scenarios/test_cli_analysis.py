@@ -57,8 +57,8 @@ def test_h_variance_follows_the_wheel_configuration():
     import numpy as np
 
     from estimator.covariance import h_variance, tach_variance
-    from scenarios.build import estimator_sensor_specs
-    from scenarios.loader import load_scenario
+    from scenarios.config.build import estimator_sensor_specs
+    from scenarios.config.loader import load_scenario
 
     kc = 0.1082 * np.sin(np.deg2rad(1.656))
     nominal = estimator_sensor_specs(load_scenario("goes_next_equinox"))

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.csvio import read_csv
-from scenarios.loader import bundled_names, load_scenario
+from scenarios.config.loader import bundled_names, load_scenario
+from scenarios.files.csvio import read_csv
 
 DT = 0.512
 RUN_FILES = {"scenario.yaml", "truth.csv", "telemetry.csv"}
@@ -301,7 +301,7 @@ def test_out_that_is_a_file_is_refused(tmp_path, capsys):
 def _interrupt_on_call(monkeypatch, which: int) -> list[str]:
     """Make the runner's ``write_csv`` write half a file, then raise KeyboardInterrupt,
     on its ``which``-th call (1 = truth.csv, 2 = telemetry.csv)."""
-    import scenarios.runner as runner
+    import scenarios.run.simulate as runner
     real = runner.write_csv
     calls: list[str] = []
 
@@ -346,7 +346,7 @@ def test_interrupt_leaves_no_parent_directories(tmp_path, monkeypatch, capsys):
 
 
 def test_internal_error_exits_1_with_one_line(tmp_path, monkeypatch, capsys):
-    import scenarios.runner as runner
+    import scenarios.run.simulate as runner
 
     def broken(*args, **kwargs):
         raise RuntimeError("integrator exploded")

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from estimator import ekf_model as m
-from scenarios import build
-from scenarios.ekf_run import run_ekf
-from scenarios.loader import load_scenario
-from scenarios.pipeline import EXTERNAL, run_scenario
-from scenarios.runner import simulate
+from scenarios.config import build
+from scenarios.config.loader import load_scenario
+from scenarios.run.ekf import run_ekf
+from scenarios.run.simulate import simulate
+from scenarios.run.whole import EXTERNAL, run_scenario
 
 DEG = np.pi / 180
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.csvio import read_csv
+from scenarios.files.csvio import read_csv
 
 from .test_cli_run import GAP_EPOCH, run_cli, run_dir
 

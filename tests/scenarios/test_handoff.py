@@ -5,8 +5,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from scenarios import handoff
-from scenarios.rundir import clean_stale_handoffs
+from scenarios.files.rundir import clean_stale_handoffs
+from scenarios.run import handoff
 
 
 @pytest.fixture

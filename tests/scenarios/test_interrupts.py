@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from scenarios.files.rundir import clean_stale, staged_run_dir
 from scenarios.montecarlo.store import SetDirectory
-from scenarios.rundir import clean_stale, staged_run_dir
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -8,8 +8,9 @@ import re
 import numpy as np
 import pytest
 
-from scenarios import build
 from scenarios.cli import main
+from scenarios.config import build
+from scenarios.config.loader import load_scenario
 from scenarios.linearization import coefficients as co
 from scenarios.linearization.propagation import (
     DEG,
@@ -20,8 +21,7 @@ from scenarios.linearization.propagation import (
     sweep_changes,
     variant,
 )
-from scenarios.loader import load_scenario
-from scenarios.runner import simulate
+from scenarios.run.simulate import simulate
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +125,7 @@ def test_eq11_divergence_matches_the_linear_twin(equinox):
 
     The 8.9e-10 rad measured is that difference of input holds, not round-off (which
     is ~1e-13 rad here, on any machine): 3e-9 keeps the check that tight on purpose."""
-    from scenarios.pipeline import run_scenario
+    from scenarios.run.whole import run_scenario
     s = variant(equinox, [("duration_s", 7200.0), ("initial_state.roll_deg", 0.5)])
     runs = run_scenario(s, smooth=False)
     params = runs.params

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from scenarios import build
-from scenarios.loader import ScenarioError, load_scenario
+from scenarios.config import build
+from scenarios.config.loader import ScenarioError, load_scenario
 from scenarios.montecarlo.dispersions import draw_case
 from sim.ephemeris import parse_epoch
 

@@ -24,7 +24,7 @@ import yaml
 from scipy import stats
 
 from estimator.consistency import chi2_bounds
-from scenarios.loader import ScenarioError, load_scenario
+from scenarios.config.loader import ScenarioError, load_scenario
 from scenarios.montecarlo.dispersions import draw_case
 
 from .mc_helpers import (

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from scenarios.loader import load_scenario
+from scenarios.config.loader import load_scenario
 from scenarios.montecarlo.stats import ensemble
 
 from .mc_helpers import (

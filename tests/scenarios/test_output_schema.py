@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from scenarios.loader import ScenarioError, load_scenario
-from scenarios.schema import output_stride, output_writes_telemetry
+from scenarios.config.loader import ScenarioError, load_scenario
+from scenarios.config.schema import output_stride, output_writes_telemetry
 
 from .test_cli_run import assert_one_line, run_cli
 

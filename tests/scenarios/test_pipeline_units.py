@@ -4,10 +4,10 @@ import numpy as np
 
 from estimator.model import H_WHEEL, R, Y
 from estimator.transition import psi_closed
-from scenarios import build
-from scenarios.loader import validate
-from scenarios.pipeline import euler_rates, project_torques, run_scenario
-from scenarios.runner import simulate
+from scenarios.config import build
+from scenarios.config.loader import validate
+from scenarios.run.simulate import simulate
+from scenarios.run.whole import euler_rates, project_torques, run_scenario
 
 
 def _scenario(**overrides):

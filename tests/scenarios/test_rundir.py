@@ -2,7 +2,7 @@
 
 import pytest
 
-from scenarios.rundir import RunDirError, staged_run_dir
+from scenarios.files.rundir import RunDirError, staged_run_dir
 
 
 def test_failed_write_leaves_previous_run_intact(tmp_path):
@@ -26,7 +26,7 @@ def test_out_must_be_a_directory(tmp_path):
 def test_swap_failure_restores_previous_run(tmp_path, monkeypatch):
     import os
 
-    from scenarios import rundir
+    from scenarios.files import rundir
     out = tmp_path / "run"
     out.mkdir()
     (out / "truth.csv").write_text("old")

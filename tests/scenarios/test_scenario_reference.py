@@ -21,10 +21,10 @@ from pathlib import Path
 import pytest
 from pydantic import BaseModel
 
-from scenarios import reference
-from scenarios.loader import ScenarioError, load_scenario, validate
-from scenarios.montecarlo.schema import Normal, Uniform
-from scenarios.schema import Scenario, leaf_paths
+from scenarios.config import reference
+from scenarios.config.loader import ScenarioError, load_scenario, validate
+from scenarios.config.montecarlo import Normal, Uniform
+from scenarios.config.schema import Scenario, leaf_paths
 
 REPO = Path(__file__).resolve().parents[2]
 DOC = REPO / "docs" / "scenario-reference.md"

@@ -15,8 +15,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from scenarios import build
-from scenarios.loader import (
+from scenarios.config import build
+from scenarios.config.loader import (
     ScenarioError,
     apply_override,
     bundled_names,

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.csvio import read_csv
-from scenarios.loader import load_scenario
-from scenarios.streamrun import stream_to_directory
+from scenarios.config.loader import load_scenario
+from scenarios.files.csvio import read_csv
+from scenarios.run.streamrun import stream_to_directory
 
 HOUR = 3600.0
 # 17:00 local at 75° W on the equinox: the night Sun gap (~20:08–04:00 local) falls
@@ -139,7 +139,7 @@ def test_daily_rows_count_the_eclipse_and_the_gap_end(one_window):
 
 
 def test_a_run_over_two_days_is_cut_into_days_and_reports_them(tmp_path_factory):
-    from scenarios.stream import window_bounds
+    from scenarios.run.stream import window_bounds
     n_day = 168_750
     assert window_bounds(2 * n_day + 1, 0.512) == [(0, 2 * n_day + 1)]
     b = window_bounds(3 * n_day + 1, 0.512)
@@ -198,8 +198,8 @@ def test_gaps_found_window_by_window_are_sun_gaps_of_the_whole_mask():
     """GapTracker against outputs.sun_gaps on the whole mask (the independent
     reference): random outages, cut into random windows, with gaps open across cuts
     and at the run's end."""
-    from scenarios.accumulate import GapTracker
-    from scenarios.outputs import sun_gaps
+    from scenarios.files.summary import sun_gaps
+    from scenarios.run.tally import GapTracker
 
     rng = np.random.default_rng(0)
     for _ in range(2000):
@@ -240,7 +240,7 @@ def test_an_error_while_the_figures_are_drawn_comes_out_and_stops_them(tmp_path,
     table is asked, not ``multiprocessing.active_children()``: when the pool's
     manager thread and ``workers.worker_pool`` both join a killed worker, the one
     that loses the race keeps listing it as started although it is gone."""
-    from scenarios import stream
+    from scenarios.run import stream
 
     def full_disk(self):
         raise OSError(28, "No space left on device")

@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 from estimator.model import N_STATES, Y
-from scenarios import build
-from scenarios.loader import load_scenario
-from scenarios.outputs import summarize, sun_gaps
+from scenarios.config import build
+from scenarios.config.loader import load_scenario
+from scenarios.files.summary import summarize, sun_gaps
 
 DT = 0.512
 RAD2DEG = 180.0 / np.pi

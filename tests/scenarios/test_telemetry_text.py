@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.columns import RAD2DEG, RADPS2RPM, as_decimal_reading, decimals_of
-from scenarios.csvio import read_csv, write_csv
-from scenarios.loader import load_scenario
-from scenarios.runner import simulate
+from scenarios.config.loader import load_scenario
+from scenarios.files.columns import RAD2DEG, RADPS2RPM, as_decimal_reading, decimals_of
+from scenarios.files.csvio import read_csv, write_csv
+from scenarios.run.simulate import simulate
 
 
 @pytest.fixture(scope="module")
@@ -129,7 +129,7 @@ def test_looked_up_readings_give_the_same_bytes_as_formatting_each_value():
     for readings on the lattice and for everything that is not (−0.0, NaN, ±inf,
     values between levels, a quantum without a short decimal, a column with more
     levels than the table takes, a column with no reading at all)."""
-    from scenarios.csvio import EXACT_FMT, _format_block
+    from scenarios.files.csvio import EXACT_FMT, _format_block
     rng = np.random.default_rng(11)
     n = 4000
     cols, quanta = [], []

@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.columns import telemetry_columns
-from scenarios.loader import load_scenario
-from scenarios.runner import simulate
-from scenarios.trim import (
+from scenarios.config.loader import load_scenario
+from scenarios.files.columns import telemetry_columns
+from scenarios.run.simulate import simulate
+from scenarios.trim.batch import (
     choose_batch,
     estimate_kappa,
     known_torques,

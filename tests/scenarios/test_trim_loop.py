@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from scenarios import build
-from scenarios.csvio import read_csv
-from scenarios.loader import load_scenario
+from scenarios.config import build
+from scenarios.config.loader import load_scenario
+from scenarios.files.csvio import read_csv
 from sim.truth import TruthStream
 
 from .test_cli_run import run_cli

@@ -24,9 +24,9 @@ from datetime import datetime
 import numpy as np
 import pytest
 
-from scenarios.build import build_sensors, streams
-from scenarios.runner import simulate
-from scenarios.schema import Scenario
+from scenarios.config.build import build_sensors, streams
+from scenarios.config.schema import Scenario
+from scenarios.run.simulate import simulate
 from sim import ephemeris
 from sim.sensors import EarthSensor, SensorSuite, Tachometer
 from sim.telemetry import make_telemetry

@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .columns import telemetry_columns
-from .loader import load_scenario
-from .montecarlo.dispersions import draw_case
-from .runner import simulate
-from .trim import choose_batch, estimate_kappa, true_kappa_Nm
+from ..config.loader import load_scenario
+from ..files.columns import telemetry_columns
+from ..montecarlo.dispersions import draw_case
+from ..run.simulate import simulate
+from ..trim.batch import choose_batch, estimate_kappa, true_kappa_Nm
 
 BATCHES_S = (21541.0, 86400.0, 2 * 86400.0, 4 * 86400.0, 7 * 86400.0)
 # The undispersed case's covariance, finely, for the curve and the 1e-7 crossing.
@@ -152,7 +152,7 @@ def main(argv=None) -> int:
     if args.figure:
         from dynprop.plots.trim import plot_batch_study
 
-        from .plotting import save_figure
+        from ..figures.run import save_figure
         save_figure(plot_batch_study(table, BATCH_LABELS, PAPER_TRIMMED_NM), Path(args.figure))
     if args.json:
         with open(args.json, "w") as fh:

@@ -36,9 +36,9 @@ from dynprop.rollout.chunks import ChunkedRollout
 from dynprop.sim.frames import rotate_312
 from dynprop.sim.telemetry import make_telemetry
 
-from . import build
-from .runner import Simulation, simulate
-from .schema import Scenario
+from ..config import build
+from ..config.schema import Scenario
+from .simulate import Simulation, simulate
 
 DEG = np.pi / 180.0
 EXTERNAL = ("solar", "magnetic", "magnetic_control", "external")

@@ -18,9 +18,9 @@ from dynprop.estimator import model as em
 from dynprop.estimator.consistency import nees
 from dynprop.estimator.kalman import ExtraNoise, kalman_filter, unpack
 
-from .decimate import output_rows
-from .outputs import NEES_STRIDE
-from .pipeline import (
+from ..files.decimate import output_rows
+from ..files.summary import NEES_STRIDE
+from .whole import (
     filter_inputs,
     initial_prior,
     model_truth,

@@ -15,10 +15,10 @@ from types import SimpleNamespace
 import numpy as np
 from dynprop.sim.frames import dcm_from_euler312
 
-from . import build
-from .pipeline import EXTERNAL
+from ..config import build
+from ..config.schema import Scenario
+from ..run.whole import EXTERNAL
 from .rundir import RunDirError
-from .schema import Scenario
 from .telemetry_file import read_input_csv
 
 DEG = np.pi / 180.0

@@ -9,16 +9,19 @@ import numpy as np
 from dynprop.estimator.kalman import rts_smoother
 from dynprop.estimator.transition import discretize
 
-from . import build
-from .comparison import comparison_arrays
-from .csvio import BackgroundWriter, write_csv
-from .outputs import (
+from ..config import build
+from ..config.schema import Scenario
+from ..files.comparison import comparison_arrays
+from ..files.csvio import BackgroundWriter, write_csv
+from ..files.rundir import RunDirError
+from ..files.summary import (
     estimate_columns,
     nees_series,
     summarize,
     write_summary,
 )
-from .pipeline import (
+from .simulate import simulate, write_simulation
+from .whole import (
     TwoRuns,
     filter_telemetry,
     model_truth,
@@ -26,9 +29,6 @@ from .pipeline import (
     telemetry_inputs,
     truth_torques,
 )
-from .rundir import RunDirError
-from .runner import simulate, write_simulation
-from .schema import Scenario
 
 
 def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = None) -> dict:
@@ -46,7 +46,7 @@ def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = Non
         return stream_to_directory(s, stage)
     flying, dispersed = s, None
     if case is not None:
-        from .montecarlo.dispersions import draw_case
+        from ..montecarlo.dispersions import draw_case
         dispersed, flying = draw_case(s, case)
     run = 0 if case is None else case
     sim = simulate(flying, run)
@@ -60,7 +60,7 @@ def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = Non
         # sees the telemetry exactly as written, so `dynprop estimate` reproduces it.
         written = write_simulation(stage, sim, truth_writer=in_background, scenario=s)
         runs = run_scenario(s, sim, written, run=run, truth_scenario=flying)
-        from .montecarlo.case import other_filters
+        from ..montecarlo.case import other_filters
         extra = other_filters(s, written)
         summary = _estimate_and_report(s, runs, written, stage, in_background, extra)
         if case is not None:
@@ -79,9 +79,9 @@ def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = Non
 
 def _write_case(s: Scenario, runs, written, stage: Path, case: int, dispersed, flying,
                 extra: dict) -> None:
-    from .loader import resolved_yaml
-    from .montecarlo.case import reduce_case
-    from .montecarlo.store import save_case
+    from ..config.loader import resolved_yaml
+    from ..montecarlo.case import reduce_case
+    from ..montecarlo.store import save_case
     (stage / "case_scenario.yaml").write_text(resolved_yaml(flying))
     if not s.montecarlo.linear_twin:
         runs = replace(runs, linear=None, twin_model=None)
@@ -109,7 +109,7 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
     summary["filters"] = ["paper", *extra]
     for name, r in extra.items():
         summary[name] = _filter_summary(s, name, r, runs.truth_model, t, present)
-    from .plotting import plot_run_figures
+    from ..figures.run import plot_run_figures
     plot_run_figures(stage)
     return summary
 
@@ -117,8 +117,8 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
 def estimate_inputs(s: Scenario, path: Path, truth_path: Path | None = None):
     """The telemetry on the filter's grid and the truth at its samples (or None),
     every problem found reported before anything is written."""
-    from .telemetry_file import on_grid, read_telemetry
-    from .truth_file import read_truth
+    from ..files.telemetry_file import on_grid, read_telemetry
+    from ..files.truth_file import read_truth
 
     grid = on_grid(read_telemetry(path, s), s.sample_interval_s, s.estimator.max_gap_s, path)
     truth = None if truth_path is None else read_truth(truth_path, s, grid.columns["t_s"])
@@ -129,8 +129,8 @@ def _other_filters(s: Scenario, columns: dict) -> dict:
     """The filters besides the paper's (``estimator.filters``) on the file's telemetry."""
     if "ekf" not in s.estimator.filters:
         return {}
-    from .ekf_run import run_ekf
-    from .pipeline import DEG
+    from .ekf import run_ekf
+    from .whole import DEG
     if "pitch_deg" not in columns:
         raise RunDirError("estimator.filters: the EKF measures pitch, and the telemetry has "
                           "no pitch_deg column; remove ekf or add the Earth sensor's pitch")
@@ -147,9 +147,9 @@ def _filter_summary(s: Scenario, name: str, result, truth_model, t_s, present) -
     window (at the Sun gaps the paper's summary uses, ``outputs.sun_gaps``)."""
     from types import SimpleNamespace
 
-    from .decimate import output_rows
-    from .filter_figures import FilterFigures
-    from .outputs import NEES_STRIDE, sun_gaps
+    from ..files.decimate import output_rows
+    from ..files.summary import NEES_STRIDE, sun_gaps
+    from .filter_tally import FilterFigures
     gaps = sun_gaps(present, s.sample_interval_s, s.estimator.sun_gap_min_h)
     rec = {"start": 0, "t_s": t_s, "truth_model": truth_model, name: SimpleNamespace(
         x=result.x, sigma=result.sigma, innovations=result.innovations,
@@ -169,7 +169,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     ``sources`` (the input files' names) goes into summary.json."""
     from types import SimpleNamespace
 
-    from .loader import resolved_yaml
+    from ..config.loader import resolved_yaml
 
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
@@ -203,7 +203,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     # One key set for every summary: `run`'s output keys, for a file filtered row by row.
     summary.update(output_interval_s=s.sample_interval_s, telemetry_written=None, daily=None)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s)}
-    from .plotting import plot_run_figures
+    from ..figures.run import plot_run_figures
     plot_run_figures(stage)
     write_summary(stage / "summary.json", summary)
     return summary

@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import build
+from ..config import build
+from ..config.loader import cap_lines, closest
+from ..config.schema import Scenario
 from .csvio import read_csv
-from .loader import cap_lines, closest
 from .rundir import RunDirError
-from .schema import Scenario
 
 REQUIRED = ("t_s", "roll_deg", "yaw_deg", "wheel1_rpm", "wheel2_rpm")
 OPTIONAL = ("pitch_deg", "yaw_sigma_deg", "sun_head")

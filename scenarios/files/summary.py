@@ -12,8 +12,8 @@ from dynprop.estimator.covariance import approx_yaw_variance
 from dynprop.estimator.kalman import unpack
 from dynprop.estimator.model import N_STATES, R, Y
 
-from . import __version__
-from .schema import Scenario
+from .. import __version__
+from ..config.schema import Scenario
 
 RAD2DEG = 180.0 / np.pi
 # Estimate columns: state name with its unit, and the factor from model units

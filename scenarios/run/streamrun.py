@@ -19,17 +19,18 @@ from itertools import islice
 from multiprocessing import get_context
 from pathlib import Path
 
-from . import build, handoff
-from .accumulate import DailyFigures, RunFigures, window_nees
-from .csvio import CsvAppender, write_csv
-from .decimate import ComparisonRows, output_rows
-from .filter_figures import FilterFigures
-from .loader import resolved_yaml
-from .outputs import assemble_summary, eq55_sigma_yaw_deg, estimate_columns, write_summary
-from .schema import Scenario, output_writes_telemetry
+from ..config import build
+from ..config.loader import resolved_yaml
+from ..config.schema import Scenario, output_writes_telemetry
+from ..files.csvio import CsvAppender, write_csv
+from ..files.decimate import ComparisonRows, output_rows
+from ..files.summary import assemble_summary, eq55_sigma_yaw_deg, estimate_columns, write_summary
+from ..trim.loop import loop_summary
+from ..workers import blas_one_thread, ignore_sigint, sigint_held
+from . import handoff
+from .filter_tally import FilterFigures
 from .stream import DAY_S, producer, windows_of
-from .trim_loop import loop_summary
-from .workers import blas_one_thread, ignore_sigint, sigint_held
+from .tally import DailyFigures, RunFigures, window_nees
 
 QUEUE_ITEMS = 4   # two windows: a real and a twin record each
 LOG_EVERY_DAYS = 10
@@ -130,7 +131,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     plan = next(records)
     # The figures' modules (matplotlib: ~0.4 s) load while the producer simulates the
     # first window, rather than after the last.
-    from .plotting import plot_run_figures, run_figures_drawn
+    from ..figures.run import plot_run_figures, run_figures_drawn
     params, _ = build.estimator_model(s)
     dt = s.sample_interval_s
     n = plan.n_samples

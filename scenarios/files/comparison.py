@@ -29,7 +29,7 @@ import numpy as np
 from dynprop.estimator.consistency import nis
 from dynprop.estimator.model import H_WHEEL, R, Y
 
-from .outputs import RAD2DEG, display_factors
+from .summary import RAD2DEG, display_factors
 
 #: telemetry.csv columns the telemetry figure draws (besides every wheelK_rpm).
 TELEMETRY_COLUMNS = ("roll_deg", "pitch_deg", "yaw_deg", "yaw_sigma_deg", "sun_head")

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .csvio import read_csv
-from .loader import load_scenario
-from .schema import Scenario
-from .trim import (
+from ..config.loader import load_scenario
+from ..config.schema import Scenario
+from ..files.csvio import read_csv
+from .batch import (
     ASSUMED_KNOWN,
     ESTIMATED,
     TrimError,
@@ -43,7 +43,7 @@ def telemetry_path(run_dir: Path, given: Path | None) -> Path:
 
 def read_run(run_dir: Path, telemetry: Path | None):
     """The run's scenario, its telemetry on the filter grid, and whether it has a truth."""
-    from .runs import estimate_inputs
+    from ..run.estimate import estimate_inputs
     if not (run_dir / "scenario.yaml").is_file():
         raise TrimError(f"{run_dir}: not a run directory (no scenario.yaml)")
     s = load_scenario(run_dir / "scenario.yaml")
@@ -193,8 +193,8 @@ def _side(s: Scenario, r: TrimResult, run_dir: Path, truth: bool) -> dict:
 def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) -> dict:
     """Fly the recommended tab from the start to the batch end (the same span and
     seed; telemetry written), into ``stage``/verify, and estimate κ again there."""
-    from .rundir import staged_run_dir
-    from .runs import run_to_directory
+    from ..files.rundir import staged_run_dir
+    from ..run.estimate import run_to_directory
     new = load_scenario(run_dir / "scenario.yaml", [
         f"environment.solar.trim_tab_deg={r.rec.trim_tab_deg_new!r}",
         f"duration_s={r.batch.to_s!r}", "output.telemetry=true"])
@@ -217,8 +217,8 @@ def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = No
     """Everything `dynprop trim` does; returns the trim.json dictionary."""
     from dynprop.plots.trim import plot_trim
 
-    from .plotting import save_figure
-    from .rundir import staged_run_dir
+    from ..figures.run import save_figure
+    from ..files.rundir import staged_run_dir
     if (Path(run_dir) / "trim_loop.csv").is_file():
         raise TrimError(f"{run_dir}: this run moved its tab as it flew (trim.every_days, see "
                         "trim_loop.csv); dynprop trim needs a run flown at one tab setting")

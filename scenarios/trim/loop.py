@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import build
-from .csvio import CsvAppender, read_csv
-from .schema import Scenario
-from .trim import TrimError, choose_batch, estimate_kappa, true_kappa_Nm
+from ..config import build
+from ..config.schema import Scenario
+from ..files.csvio import CsvAppender, read_csv
+from .batch import TrimError, choose_batch, estimate_kappa, true_kappa_Nm
 
 LOOP_COLUMNS = ("day", "trim_tab_deg", "kappa_true_Nm", "torquer_dipole_rms_Am2",
                 "torquer_saturated_fraction", "h_rms_Nms", "roll_rms_deg", "yaw_rms_deg",

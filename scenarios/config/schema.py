@@ -19,7 +19,7 @@ from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.telemetry import MIN_SUN_SEPARATION_DEG
 from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
 
-from .montecarlo.schema import MonteCarlo, check_dispersion
+from .montecarlo import MonteCarlo, check_dispersion
 
 # The simulator's dataclasses hold the GOES-Next defaults; the schema reads them
 # from there so that the two can never disagree.

@@ -17,8 +17,8 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from . import __version__
-from .montecarlo.schema import DISTRIBUTION_TAGS, Normal, Uniform
+from .. import __version__
+from .montecarlo import DISTRIBUTION_TAGS, Normal, Uniform
 from .schema import Scenario
 
 
@@ -73,7 +73,7 @@ _Loader.add_constructor("tag:yaml.org,2002:set", _no_set)
 
 
 def bundled_dir() -> Path:
-    return Path(str(resources.files(__package__)))
+    return Path(str(resources.files("dynprop.scenarios").joinpath("bundled")))
 
 
 def bundled_names() -> list[str]:

@@ -10,9 +10,9 @@ from dynprop.estimator.consistency import chi2_bounds, nees, nis
 from dynprop.estimator.kalman import unpack
 from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 
-from .accumulate import Mean, Rms
-from .decimate import output_rows
-from .outputs import NEES_STRIDE, RAD2DEG
+from ..files.decimate import output_rows
+from ..files.summary import NEES_STRIDE, RAD2DEG
+from .tally import Mean, Rms
 
 EKF_MEASUREMENTS = ("roll", "pitch", "yaw", "h")
 

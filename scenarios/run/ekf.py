@@ -14,9 +14,9 @@ from dynprop.estimator import model as em
 from dynprop.estimator.ekf import EkfInputs, EkfResult, ekf_filter, initial_state
 from dynprop.estimator.preprocess import wheel_torque
 
-from . import build
-from .pipeline import filter_inputs, initial_prior
-from .schema import Scenario
+from ..config import build
+from ..config.schema import Scenario
+from .whole import filter_inputs, initial_prior
 
 DEG = np.pi / 180.0
 

@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..workers import ignore_sigint, sigint_held, worker_pool
 from .columns import decimals_of
-from .workers import ignore_sigint, sigint_held, worker_pool
 
 FMT = "%.10g"
 BLOCK_ROWS = 40_000

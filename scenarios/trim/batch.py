@@ -24,9 +24,9 @@ from dynprop.estimator.trim import KappaFit, Recommendation, equivalent_states, 
 from dynprop.sim import geomag
 from dynprop.sim.truth import TruthStream
 
-from . import build
-from .pipeline import filter_inputs, initial_prior, telemetry_inputs
-from .schema import QUARTER_ORBIT_S, Scenario
+from ..config import build
+from ..config.schema import QUARTER_ORBIT_S, Scenario
+from ..run.whole import filter_inputs, initial_prior, telemetry_inputs
 
 ASSUMED_KNOWN = (
     "the Sun's direction and distance (the ephemeris), the Earth's shadow and the "

@@ -17,8 +17,8 @@ import numpy as np
 from dynprop.estimator.consistency import chi2_bounds, nis
 from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 
-from .decimate import output_rows
-from .outputs import NEES_STRIDE, RAD2DEG
+from ..files.decimate import output_rows
+from ..files.summary import NEES_STRIDE, RAD2DEG
 
 DAY_S = 86400.0
 

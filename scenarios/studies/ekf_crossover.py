@@ -22,11 +22,11 @@ import numpy as np
 from dynprop.estimator.consistency import chi2_bounds, nees
 from dynprop.estimator.kalman import unpack
 
-from . import build
-from .ekf_run import run_ekf
-from .linearization.propagation import sweep_changes
-from .loader import load_scenario
-from .pipeline import run_scenario
+from ..config import build
+from ..config.loader import load_scenario
+from ..linearization.propagation import sweep_changes
+from ..run.ekf import run_ekf
+from ..run.whole import run_scenario
 
 CASES = (("attitude", 0.0), ("attitude", 0.1), ("attitude", 1.0), ("attitude", 3.0),
          ("attitude", 5.0), ("attitude", 7.0),

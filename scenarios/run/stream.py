@@ -41,22 +41,22 @@ from dynprop.estimator.transition import discretize
 from dynprop.sim.telemetry import sense_window
 from dynprop.sim.truth import TruthStream
 
-from . import build
-from .columns import telemetry_columns, telemetry_lattices, truth_columns
-from .csvio import CsvAppender
-from .decimate import output_rows
-from .ekf_run import EkfStream
-from .outputs import NEES_STRIDE
-from .pipeline import (
+from ..config import build
+from ..config.schema import Scenario, output_stride
+from ..files.columns import telemetry_columns, telemetry_lattices, truth_columns
+from ..files.csvio import CsvAppender
+from ..files.decimate import output_rows
+from ..files.summary import NEES_STRIDE
+from ..trim.loop import TrimLoop
+from .ekf import EkfStream
+from .twin_filter import TwinFilter, padded_inputs, twin_window
+from .whole import (
     DEG,
     initial_prior,
     model_truth,
     telemetry_inputs,
     truth_torques,
 )
-from .schema import Scenario, output_stride
-from .trim_loop import TrimLoop
-from .twin_stream import TwinFilter, padded_inputs, twin_window
 
 DAY_S = 86400.0
 SINGLE_WINDOW_S = 2 * DAY_S

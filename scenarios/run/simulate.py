@@ -15,11 +15,11 @@ from dynprop.sim.sensors import SensorSuite
 from dynprop.sim.telemetry import Telemetry, sense_window
 from dynprop.sim.truth import TruthResult, TruthStream
 
-from . import build
-from .columns import telemetry_columns, telemetry_lattices, truth_columns
-from .csvio import write_csv
-from .loader import resolved_yaml
-from .schema import Scenario
+from ..config import build
+from ..config.loader import resolved_yaml
+from ..config.schema import Scenario
+from ..files.columns import telemetry_columns, telemetry_lattices, truth_columns
+from ..files.csvio import write_csv
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ import numpy as np
 from dynprop.estimator.model import H_WHEEL, R, Y
 
 from .comparison import comparison_arrays
-from .outputs import NEES_STRIDE, display_factors
+from .summary import NEES_STRIDE, display_factors
 
 ENVELOPED = ("err_real", "err_linear", "err_real_minus_linear", "err_smoothed",
              "nees_real", "nees_linear")

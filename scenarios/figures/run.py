@@ -28,9 +28,9 @@ from dynprop.plots.telemetry import plot_telemetry_overview
 from dynprop.plots.trim import plot_trim_loop
 from dynprop.plots.truth import plot_truth
 
-from .csvio import read_csv
-from .rundir import RunDirError
-from .workers import worker_pool
+from ..files.csvio import read_csv
+from ..files.rundir import RunDirError
+from ..workers import worker_pool
 
 # Columns of the comparison arrays: the model's state indices (estimator.model).
 COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
@@ -75,8 +75,8 @@ def figure_set(keys) -> list[str]:
 def _dss_note(scenario: dict) -> str | None:
     """Why yaw NIS is small in DSS periods, with the filter's σ inflation for the DSS
     (``pipeline.yaw_correlation_inflation``, the function the filter used)."""
-    from .loader import validate
-    from .pipeline import yaw_correlation_inflation
+    from ..config.loader import validate
+    from ..run.whole import yaw_correlation_inflation
     s = validate(scenario)
     factor = float(np.sqrt(yaw_correlation_inflation(s, [0.0])[0]))
     if factor <= 1.0:
