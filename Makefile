@@ -41,7 +41,7 @@ lint: $(STAMP)
 
 # docs/scenario-reference.md is generated from the schema; a test fails when it is stale.
 docs: $(STAMP)
-	$(BIN)/python -m dynprop.scenarios.reference --out docs/scenario-reference.md
+	$(BIN)/python -m dynprop.scenarios.config.reference --out docs/scenario-reference.md
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -147,8 +147,8 @@ def ekf_over_filter() -> float:
     from dynprop.estimator.ekf import EkfInputs, ekf_filter
     from dynprop.estimator.kalman import Measurements, kalman_filter
     from dynprop.estimator.transition import discretize
+    from dynprop.scenarios.bridge.ekf import ekf_design
     from dynprop.scenarios.config.build import estimator_model
-    from dynprop.scenarios.run.ekf import ekf_design
     scenario = load_scenario("goes_next_equinox", ["duration_s=86400"])
     params, noise = estimator_model(scenario)
     disc = discretize(params, noise, 0.512)
@@ -219,7 +219,7 @@ def main() -> None:
     # Issue 16: the extended Kalman filter on the same day, pitch measured like roll;
     # its target is a ratio to filter_s_per_day of the same bench run (≤ 4×).
     from dynprop.estimator.ekf import EkfInputs, ekf_filter
-    from dynprop.scenarios.run.ekf import ekf_design
+    from dynprop.scenarios.bridge.ekf import ekf_design
     pm, wn, X0, P0e = ekf_design(scenario)
     ekf_in = EkfInputs(
         np.column_stack([meas.roll_rad, rng.normal(0, 1.8e-4, n), yaw, meas.h_Nms]),

@@ -61,14 +61,12 @@ def simulate(scenario: Scenario | str) -> SimulationResult:
 
         sim = dynprop.simulate(s)
         sim.truth[["roll_deg", "yaw_deg"]].plot()"""
+    from dynprop.scenarios.commands import simulate_to_directory
     from dynprop.scenarios.files.rundir import staged_run_dir
-    from dynprop.scenarios.run.simulate import simulate as sim
-    from dynprop.scenarios.run.simulate import write_simulation
     s = _scenario(scenario)
     owner, out = _temporary("simulate")
-    result = sim(s)
     with staged_run_dir(out) as stage:
-        write_simulation(stage, result)
+        simulate_to_directory(s, stage)
     return SimulationResult(out, owner)
 
 
@@ -79,8 +77,8 @@ def run(scenario: Scenario | str) -> RunResult:
         r = dynprop.run(s)
         r.summary["yaw_error_at_gap_end_deg"], r.errors()["yaw_deg"].abs().max()
         r.figure("errors"); r.save("runs/eq")"""
+    from dynprop.scenarios.commands import run_to_directory
     from dynprop.scenarios.files.rundir import staged_run_dir
-    from dynprop.scenarios.run.estimate import run_to_directory
     s = _scenario(scenario)
     owner, out = _temporary("run")
     with staged_run_dir(out) as stage:
@@ -141,7 +139,7 @@ def observability(scenario: Scenario | str) -> TextReport:
 def covariance(scenario: Scenario | str) -> TextReport:
     """Section 6's steady-state yaw σ by every method against the paper's 0.040°
     (`dynprop covariance`); ``.data`` is the report's dict."""
-    from dynprop.estimator.covariance import covariance_report, format_covariance_report
+    from dynprop.estimator.covariance_report import covariance_report, format_covariance_report
     from dynprop.scenarios.config.build import estimator_model, estimator_sensor_specs
     s = _scenario(scenario)
     params, noise = estimator_model(s)

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from dynprop.scenarios.files.columns import STATE_COLUMNS
 from dynprop.scenarios.files.csvio import read_csv
 from dynprop.scenarios.files.rundir import staged_run_dir
-from dynprop.scenarios.files.summary import STATE_COLUMNS
 
 
 def _table(path: Path) -> pd.DataFrame | None:

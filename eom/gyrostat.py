@@ -1,5 +1,11 @@
 """Symbolic gyrostat dynamics and attitude kinematics (CasADi SX), docs/conventions.md.
 
+The torque laws at the end (gravity gradient, solar imbalance, magnetic dipole and
+the torquers' unloading law) take CasADi symbols, as the truth's step and the EKF
+build them, and numpy arrays of 3-vectors (rows), as the ground rebuilds the known
+torques from telemetry (``scenarios.trim``): one formula for both, so the ground's
+torques are the truth's.
+
 Two forms of the same Euler equation are provided, because the wheels can be
 driven two ways:
 
@@ -19,6 +25,7 @@ relative to the body; H = Jω + Σ I_w Ω_i a_i is then the total angular moment
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 
 def skew(v):
@@ -78,6 +85,18 @@ def euler312(c):
     return yaw, roll, pitch
 
 
+def euler312_rates(roll, pitch, wx, wy, wz):
+    """(ψ̇, φ̇, θ̇) from ω_BR = (wx, wy, wz) in body axes for C_BR = R2(θ)R1(φ)R3(ψ),
+    the inverse of ω = (cθ φ̇ − sθ cφ ψ̇, θ̇ + sφ ψ̇, sθ φ̇ + cθ cφ ψ̇): CasADi symbols
+    (the EKF's paper coordinates) or numpy arrays (the truth's, ``sim.frames``)."""
+    cos, sin = (np.cos, np.sin) if _numeric(roll) else (ca.cos, ca.sin)
+    cth, sth, cph, sph = cos(pitch), sin(pitch), cos(roll), sin(roll)
+    roll_dot = cth * wx + sth * wz
+    yaw_dot = (-sth * wx + cth * wz) / cph
+    pitch_dot = wy - sph * yaw_dot
+    return yaw_dot, roll_dot, pitch_dot
+
+
 def dcm_from_euler312(yaw, roll, pitch):
     """``C_BR = R2(pitch) R1(roll) R3(yaw)``, symbolic (as ``sim.frames``)."""
     cy, sy = ca.cos(yaw), ca.sin(yaw)
@@ -100,22 +119,52 @@ def rot_about_y_cs(c, s):
     return ca.vertcat(ca.horzcat(c, 0, s), ca.horzcat(0, 1, 0), ca.horzcat(-s, 0, c))
 
 
-def gravity_gradient_torque(c_br, J, coef):
-    """``3μ/R³ · n̂ × J n̂`` with n̂ the nadir (z_R) in body axes; ``coef`` = 3μ/R³."""
-    n = c_br[:, 2]
-    return coef * ca.cross(n, J @ n)
+def _numeric(*values) -> bool:
+    return all(isinstance(v, np.ndarray) for v in values)
 
 
-def solar_torque(c_br, sun_r, coef, lever_axis):
+def _cross(a, b):
+    """a × b: numpy rows of 3-vectors (broadcast), or CasADi 3-vectors."""
+    return np.cross(a, b) if _numeric(a, b) else ca.cross(a, b)
+
+
+def _times(M, v):
+    """M v: for numpy rows of 3-vectors, each row times Mᵀ."""
+    return v @ np.asarray(M).T if _numeric(v) else M @ v
+
+
+def gravity_gradient_torque(nadir_b, J, coef):
+    """``3μ/R³ · n̂ × J n̂`` with n̂ the nadir (z_R, the third column of C_BR) in body
+    axes; ``coef`` = 3μ/R³ = 3ω0²."""
+    return coef * _cross(nadir_b, _times(J, nadir_b))
+
+
+def solar_torque(sun_b, coef, lever_axis):
     """Array–sail imbalance torque ``κ · d̂ × ŝ`` (paper Section 2.2).
 
     d̂ is the array-to-sail centre-of-pressure direction (≈ pitch axis) and ŝ the
     spacecraft-to-Sun unit vector, both in body axes.  ``coef`` = κ already scaled by
-    the shadow factor and (1 AU / r)²; the sign of κ sets the torque's phase.
+    the shadow factor and (1 AU / r)² (numpy: a column, one per row of ``sun_b``);
+    the sign of κ sets the torque's phase.
     """
-    return coef * ca.cross(lever_axis, c_br @ sun_r)
+    return coef * _cross(lever_axis, sun_b)
 
 
-def magnetic_torque(c_br, field_r, dipole_b):
-    """``m × B`` with B given in the orbit frame (constant there for a GEO satellite)."""
-    return ca.cross(dipole_b, c_br @ field_r)
+def magnetic_torque(dipole_b, field_b):
+    """``m × B``, both in body axes (B is constant in the orbit frame at GEO)."""
+    return _cross(dipole_b, field_b)
+
+
+def unloading_dipole(field_b, h, gain, m_max, floor: float = 1e-30):
+    """The torquers' momentum-unloading law: the dipole ``m = B × T_des / |B|²`` for
+    the desired torque ``T_des = −k_m h ẑ``, each axis saturated at ±``m_max``.
+    ``floor`` keeps m finite (and zero) if the field is ever zero.  numpy: h a
+    vector of samples and B one field for all of them."""
+    if _numeric(h):
+        t_des = np.zeros((len(h), 3))
+        t_des[:, 2] = -gain * h
+        m = _cross(field_b, t_des) / (field_b @ field_b + floor)
+        return np.clip(m, -m_max, m_max)
+    t_des = ca.vertcat(0, 0, -gain * h)
+    m = _cross(field_b, t_des) / (ca.dot(field_b, field_b) + floor)
+    return ca.fmin(ca.fmax(m, -m_max), m_max)

@@ -23,7 +23,13 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from dynprop.eom.gyrostat import dcm_from_quat, euler312, quat_rate
+from dynprop.eom.gyrostat import (
+    dcm_from_quat,
+    euler312,
+    euler312_rates,
+    gravity_gradient_torque,
+    quat_rate,
+)
 
 NX, NE, NU, NZ = 12, 11, 5, 4
 Q, W, HW, NP, NC = slice(0, 4), slice(4, 7), 7, slice(8, 10), slice(10, 12)
@@ -83,7 +89,7 @@ def derivative(X, u, p):
     w = w_br + w_rn
     h_w = ca.vertcat(0, H, h)
     n = C[:, 2]                                    # nadir in body axes
-    torque = (3 * w0**2 * ca.cross(n, J @ n)
+    torque = (gravity_gradient_torque(n, J, 3 * w0**2)
               + ca.vertcat(Nx + npx + ncx, 0, Nz + npz + ncz)
               - ca.cross(w, J @ w + h_w) - ca.vertcat(0, Hdot, Nw))
     w_dot = inverse_inertia(p) @ torque
@@ -111,12 +117,10 @@ def measure(X):
 
 def paper_coordinates(X, p, omega_n_radps):
     """The state in the paper's coordinates (Eq. 10): roll, φ̇/ω_n, yaw, ψ̇/ω_n, h and
-    the torque states, with the Euler rates of ω_BR as ``pipeline.euler_rates``."""
+    the torque states, with the Euler rates of ω_BR (``eom.gyrostat.euler312_rates``)."""
     yaw, roll, pitch = euler312(dcm_from_quat(X[Q]))
     w = X[W]
-    cth, sth = ca.cos(pitch), ca.sin(pitch)
-    roll_dot = cth * w[0] + sth * w[2]
-    yaw_dot = (-sth * w[0] + cth * w[2]) / ca.cos(roll)
+    yaw_dot, roll_dot, _ = euler312_rates(roll, pitch, w[0], w[1], w[2])
     return ca.vertcat(roll, roll_dot / omega_n_radps, yaw, yaw_dot / omega_n_radps, X[HW],
                       X[8:12])
 

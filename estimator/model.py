@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from dynprop.eom.linear import eq5_inertia
 
 R, RDOT, Y, YDOT, H_WHEEL, NPX, NPZ, NCX, NCZ = range(9)
 STATE_NAMES = ("roll", "roll_rate_scaled", "yaw", "yaw_rate_scaled", "h", "N_px", "N_pz",
@@ -49,7 +50,7 @@ class ModelParams:
     @property
     def I_kgm2(self) -> float:
         """I = √(I_x I_z) (Eq. 5)."""
-        return float(np.sqrt(self.Ix_kgm2 * self.Iz_kgm2))
+        return eq5_inertia(self.Ix_kgm2, self.Iz_kgm2)
 
     @property
     def omega_n_radps(self) -> float:
@@ -90,9 +91,8 @@ def yaw_momentum_Nms(wheel_inertia_kgm2: float, speed1_radps, speed2_radps, cant
         * np.sin(cant_rad)
 
 
-def blocks(p: ModelParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A (4×4, Eq. 11c), B (4×5, Eq. 11d) and C (5×5, Eq. 11e)."""
-    w0, wn, H = p.omega0_radps, p.omega_n_radps, p.H_Nms
+def roll_yaw_blocks(w0: float, wn: float, H: float) -> tuple[np.ndarray, np.ndarray]:
+    """A (4×4, Eq. 11c) and B (4×5, Eq. 11d) from ω0, the signed ω_n and H."""
     A = np.array([[0.0, wn, 0.0, 0.0],
                   [w0, 0.0, 0.0, wn + w0],
                   [0.0, 0.0, 0.0, wn],
@@ -101,6 +101,13 @@ def blocks(p: ModelParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                   [w0, 1.0, 0.0, 1.0, 0.0],
                   [0.0, 0.0, 0.0, 0.0, 0.0],
                   [0.0, 0.0, 1.0, 0.0, 1.0]]) / H
+    return A, B
+
+
+def blocks(p: ModelParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A (4×4, Eq. 11c), B (4×5, Eq. 11d) and C (5×5, Eq. 11e)."""
+    w0 = p.omega0_radps
+    A, B = roll_yaw_blocks(w0, p.omega_n_radps, p.H_Nms)
     C = np.zeros((5, 5))
     C[1, 2] = w0
     C[2, 1] = -w0
@@ -126,6 +133,47 @@ def input_vector(p: ModelParams, Nx_Nm=0.0, Nz_Nm=0.0, Nw_Nm=0.0) -> np.ndarray:
     u[..., YDOT] = (Nz - Nw) / p.H_Nms
     u[..., H_WHEEL] = Nw
     return u
+
+
+def torque_input_matrix(H_Nms: float) -> np.ndarray:
+    """∂ū/∂(N_x*, N_z*, N_w*) of Eq. 12a, (9, 3): the continuous input matrix of the
+    modelled torques."""
+    G = np.zeros((N_STATES, 3))
+    G[RDOT, 0] = 1 / H_Nms
+    G[YDOT, 1] = 1 / H_Nms
+    G[YDOT, 2] = -1 / H_Nms
+    G[H_WHEEL, 2] = 1.0
+    return G
+
+
+def input_torques(p: ModelParams, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N_x*, N_z*, N_w*) back from inputs ū (..., 9) of Eq. 12a."""
+    Nw = u[..., H_WHEEL]
+    return u[..., RDOT] * p.H_Nms, u[..., YDOT] * p.H_Nms + Nw, Nw
+
+
+def project_torques(t_s, nx, nz, w0):
+    """Least-squares fit of torques to the model's form, N_x = N_cx + c0 a + s0 b,
+    N_z = N_cz − s0 a + c0 b (Eqs. 9, 18), c0 = cos ω0t, s0 = sin ω0t.  Returns the
+    torque-state histories (N, 4) [N_px, N_pz, N_cx, N_cz] and the residuals."""
+    c, s = np.cos(w0 * t_s), np.sin(w0 * t_s)
+    one = np.ones_like(c)
+    # Unknowns (a, b, N_cx, N_cz).  The normal equations need only a few sums over
+    # the run (no 2N×4 matrix): with c² + s² = 1 they are well conditioned once the
+    # run covers a fair part of an orbit; shorter runs go to lstsq (minimum norm).
+    n, sc, ss = len(c), c.sum(), s.sum()
+    G = np.array([[n, 0.0, sc, -ss], [0.0, n, ss, sc], [sc, ss, n, 0.0], [-ss, sc, 0.0, n]])
+    # np.sum, not BLAS dot: a threaded BLAS sums in an order that depends on the
+    # thread count, and a Monte Carlo case must give the same bits in any process.
+    rhs = np.array([np.sum(c * nx - s * nz), np.sum(s * nx + c * nz), nx.sum(), nz.sum()])
+    if n and np.linalg.cond(G) < 1e4:
+        a, b, ncx, ncz = np.linalg.solve(G, rhs)
+    else:
+        zero = np.zeros_like(c)
+        A = np.vstack([np.column_stack([c, s, one, zero]), np.column_stack([-s, c, zero, one])])
+        a, b, ncx, ncz = np.linalg.lstsq(A, np.concatenate([nx, nz]), rcond=None)[0]
+    states = np.column_stack([c * a + s * b, -s * a + c * b, ncx * one, ncz * one])
+    return states, nx - states[:, 0] - ncx, nz - states[:, 1] - ncz
 
 
 def noise_density(p: ModelParams, q: ProcessNoise) -> np.ndarray:

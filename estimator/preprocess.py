@@ -31,8 +31,18 @@ PAPER_SENSORS = SensorSpecs()  # Sections 2.1 and 2.3
 
 
 def yaw_momentum(wheel_speeds_radps: np.ndarray, yaw_factors: np.ndarray) -> np.ndarray:
-    """h = Σ k_i Ω_i (N m s) from wheel speeds (N, n) and k_i = I_w,i a_i·ẑ."""
+    """h = Σ k_i Ω_i (N m s) from wheel speeds (N, n) and k_i = I_w,i a_i·ẑ (Eq. 2);
+    with k_i = I_w,i a_i·ŷ, the pitch momentum H of Eq. 1 likewise."""
     return np.asarray(wheel_speeds_radps) @ np.asarray(yaw_factors, dtype=float)
+
+
+def quantisation_inflation(noise: float, quantum: float, samples: float) -> float:
+    """Factor on a reading's variance noise² + quantum²/12 when its quantisation
+    error stays correlated over ``samples`` samples: treating correlated samples as
+    independent makes a filter over-confident, so the quantisation share counts
+    once per correlation time, (noise² + q²/12 · samples)/(noise² + q²/12)."""
+    quant = quantum**2 / 12
+    return (noise**2 + quant * samples) / (noise**2 + quant)
 
 
 def wheel_torque(h_Nms: np.ndarray, dt_s: float, window_s: float = 20.0) -> np.ndarray:

@@ -33,7 +33,6 @@ from .decor import (  # noqa: E402
 from .reduce import band, f64, interval_stats, max_abs, minmax_line, nice_interval_s, pct  # noqa: E402
 
 #: The paper's yaw 1σ (Eq. 56), in degrees; callers pass ``estimator.covariance``'s.
-PAPER_SIGMA_YAW_DEG = 0.040
 
 REAL, LINEAR, SMOOTH, DIFF, SIGMA, EKF = "C3", "C0", "k", "C1", "darkgreen", "C4"
 LABEL_REAL = "real: filter on nonlinear-truth telemetry, minus that truth"
@@ -244,8 +243,8 @@ def _difference_panel(ax, t_s, t_h, gap, name: str, s: dict, interval_s: float) 
                  loc="left", fontsize=9)
 
 
-def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0,
-                paper_sigma_deg: float = PAPER_SIGMA_YAW_DEG):
+def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
+                paper_sigma_deg: float):
     """Estimation error vs time for roll, yaw and h, and real − linearized beneath each.
 
     ``series[name]`` = {"unit": "deg" | "N m s", "real": estimate − nonlinear truth,
@@ -285,8 +284,8 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0,
     return fig
 
 
-def plot_estimates(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0,
-                   paper_sigma_deg: float = PAPER_SIGMA_YAW_DEG):
+def plot_estimates(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
+                   paper_sigma_deg: float):
     """Without a truth: the estimates of roll, yaw and h with the filter's ±3σ about
     them.  ``series[name]`` = {"unit", "estimate", "sigma"}."""
     t_s = f64(t_s)

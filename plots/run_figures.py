@@ -26,7 +26,7 @@ from .decor import (  # noqa: E402
     shade_mask,
     time_axis,
 )
-from .errors import PAPER_SIGMA_YAW_DEG, plot_errors, plot_estimates  # noqa: E402, F401
+from .errors import plot_errors, plot_estimates  # noqa: E402, F401
 from .reduce import band, f64, minmax_line, pct  # noqa: E402
 from .telemetry import plot_telemetry_overview  # noqa: E402, F401
 

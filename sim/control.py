@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-from dynprop.eom.gyrostat import euler312
+from dynprop.eom.gyrostat import euler312, unloading_dipole
 
 
 @dataclass(frozen=True)
@@ -76,10 +76,5 @@ def control_law(c_br, w_br, wheel_speeds, field_r, prm):
         + prm["h_gain"] * h
     u = on * (prm["alloc"] @ ca.vertcat(pitch_demand, yaw_demand))
 
-    field_b = c_br @ field_r
-    t_des = ca.vertcat(0, 0, -prm["mtq_gain"] * h)
-    # The tiny floor keeps m finite (and zero) if the field is ever zero.
-    m = ca.cross(field_b, t_des) / (ca.dot(field_b, field_b) + 1e-30)
-    m_max = prm["mtq_max"]
-    m = on * ca.fmin(ca.fmax(m, -m_max), m_max)
+    m = on * unloading_dipole(c_br @ field_r, h, prm["mtq_gain"], prm["mtq_max"])
     return u, m

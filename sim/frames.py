@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from dynprop.eom import gyrostat
 
 MU_EARTH_M3PS2 = 3.986004418e14
 GEO_RADIUS_M = 42_164_170.0
@@ -73,6 +74,28 @@ def rotate_312(yaw, roll, pitch, v: np.ndarray) -> np.ndarray:
     out[:, 1] = y
     out[:, 2] = s * x + c * z
     return out
+
+
+def nadir_body(roll, pitch) -> np.ndarray:
+    """The nadir z_R in body axes, C_BR's third column, (N, 3): for C_BR = R2(θ) R1(φ)
+    R3(ψ) it does not depend on yaw."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    return np.column_stack([-sp * cr, sr, cp * cr])
+
+
+def euler312_rates(euler_rad: np.ndarray, w_br: np.ndarray) -> np.ndarray:
+    """(ψ̇, φ̇, θ̇) (N, 3) from the 3-1-2 angles (yaw, roll, pitch) and ω_BR in body
+    axes, (N, 3) each (``eom.gyrostat.euler312_rates``)."""
+    _, roll, pitch = euler_rad.T
+    return np.column_stack(gyrostat.euler312_rates(roll, pitch, w_br[:, 0], w_br[:, 1],
+                                                   w_br[:, 2]))
+
+
+def rate_wrt_orbit(c_br: np.ndarray, w_bn: np.ndarray, omega0_radps: float) -> np.ndarray:
+    """ω_BR = ω_BN − C_BR ω_RN (body axes, (N, 3)): the orbit frame turns at −ω0
+    about y_R, so ω_BR = ω_BN + ω0 · C_BR's second column."""
+    return w_bn + omega0_radps * c_br[:, :, 1]
 
 
 def euler312_from_dcm(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 from dynprop.eom import gyrostat as dyn
+from dynprop.eom.linear import eq3_coefficients, jacobian_of
 
 from .frames import GeoOrbit
 from .spacecraft import Spacecraft
@@ -29,7 +30,7 @@ class EulerLinearization:
     """Jacobians of (ψ̈, φ̈, θ̈) at the nominal state.
 
     Columns of ``wrt_state``: ψ, φ, θ, ψ̇, φ̇, θ̇, h.  Columns of ``wrt_input``:
-    N_x, N_y, N_z, Ḣ, ḣ.  Rows: ψ̈, φ̈, θ̈.  Units SI.
+    N_x, N_y, N_z, Ḣ, ḣ.  Rows: ψ̈, φ̈, θ̈.  Units SI (the layout of ``eom.linear``).
     """
 
     wrt_state: np.ndarray
@@ -72,7 +73,7 @@ def euler_angle_accelerations(spacecraft: Spacecraft, orbit: GeoOrbit,
     w_bn = w_br + c_br @ w_rn
     torque = n_ext
     if gravity_gradient:
-        torque = torque + dyn.gravity_gradient_torque(c_br, J, 3.0 * w0**2)
+        torque = torque + dyn.gravity_gradient_torque(c_br[:, 2], J, 3.0 * w0**2)
     w_bn_dot = dyn.body_accel_from_wheel_accel(w_bn, wheel_speeds, wheel_accels, torque,
                                                J, Iw, A)
     # d/dt(C_BR ω_RN) = −[ω_BR×] C_BR ω_RN for a constant ω_RN in R.
@@ -101,25 +102,10 @@ def linearize_about_nominal(spacecraft: Spacecraft, orbit: GeoOrbit) -> EulerLin
 
 
 def paper_eq3_coefficients(spacecraft: Spacecraft, orbit: GeoOrbit) -> EulerLinearization:
-    """The same Jacobians written from the paper's Eqs. 3a–3c (signed H, diagonal J)."""
+    """The same Jacobians written from the paper's Eqs. 3a–3c (signed H, diagonal J,
+    ``eom.linear``)."""
     Ix, Iy, Iz = np.diag(spacecraft.J)
     H = float(spacecraft.pitch_bias_Nms())
     w0 = orbit.rate_radps
-    g = H + (Ix - Iy + Iz) * w0
-    x = np.zeros((3, 7))
-    u = np.zeros((3, 5))
-    # Row 0: yaw, Eq. 3c.  Iz ÿ = ω0[H − (Iy − Ix)ω0] y − [H + (Ix − Iy + Iz)ω0] ṙ + Nz − Nw
-    x[0, 0] = w0 * (H - (Iy - Ix) * w0) / Iz
-    x[0, 4] = -g / Iz
-    u[0, 2] = 1 / Iz
-    u[0, 4] = -1 / Iz
-    # Row 1: roll, Eq. 3a.  Ix r̈ = ω0[H − 4(Iy − Iz)ω0] r + [H + (Ix − Iy + Iz)ω0] ẏ + Nx + ω0 h
-    x[1, 1] = w0 * (H - 4 * (Iy - Iz) * w0) / Ix
-    x[1, 3] = g / Ix
-    x[1, 6] = w0 / Ix
-    u[1, 0] = 1 / Ix
-    # Row 2: pitch, Eq. 3b.  Iy p̈ = −3ω0²(Ix − Iz) p + Ny − Ḣ
-    x[2, 2] = -3 * w0**2 * (Ix - Iz) / Iy
-    u[2, 1] = 1 / Iy
-    u[2, 3] = -1 / Iy
+    x, u = jacobian_of(eq3_coefficients(Ix, Iy, Iz, H, w0))
     return EulerLinearization(x, u, H, w0)

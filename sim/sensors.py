@@ -28,8 +28,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .spacecraft import RPM
+
 DEG = np.pi / 180.0
-RPM = 2.0 * np.pi / 60.0
 
 
 def quantize(x: np.ndarray, quantum: float) -> np.ndarray:

@@ -115,6 +115,18 @@ class Spacecraft:
         """h: the body-z wheel momentum (Eq. 2)."""
         return self.wheel_momentum(speeds_radps)[..., 2]
 
+    def momentum_factors(self, axis: int) -> np.ndarray:
+        """k_i = I_w,i a_i[axis]: the wheels' momentum along body ``axis`` is Σ k_i Ω_i
+        (axis 2: h of Eq. 2, from the tachometers; axis 1: H of Eq. 1)."""
+        return self.wheel_inertias * self.wheel_axes[:, axis]
+
+    def speeds_with_yaw_momentum(self, speeds_radps: np.ndarray, h_Nms: np.ndarray,
+                                 h_new_Nms: np.ndarray) -> np.ndarray:
+        """Wheel speeds (N, n) carrying yaw momentum ``h_new`` instead of ``h``: the
+        smallest (minimum-norm) change of the speeds, k (h_new − h)/|k|²."""
+        k = self.momentum_factors(2)
+        return speeds_radps + np.outer(h_new_Nms - h_Nms, k / (k @ k))
+
 
 def canted_axes(cant_deg: float) -> tuple[tuple[float, float, float], ...]:
     """The two momentum-wheel axes of docs/conventions.md, canted ±cant from −y."""

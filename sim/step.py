@@ -123,11 +123,11 @@ def _rates(x, u, n_ext_total, prm, n: int):
 def _env_torques(q, sun_r, ex, prm, m_ctrl):
     """Gravity gradient, solar, magnetic disturbance and magnetic control torques."""
     c_br = dyn.dcm_from_quat(q)
-    t_gg = dyn.gravity_gradient_torque(c_br, prm["J"], prm["gg_coef"])
-    t_sol = dyn.solar_torque(c_br, sun_r, prm["solar_coef"] * ex["sun_scale"],
+    t_gg = dyn.gravity_gradient_torque(c_br[:, 2], prm["J"], prm["gg_coef"])
+    t_sol = dyn.solar_torque(c_br @ sun_r, prm["solar_coef"] * ex["sun_scale"],
                              prm["solar_axis"])
-    t_mag = dyn.magnetic_torque(c_br, prm["field_r"], prm["m_res"] + ex["m_prof"])
-    t_mtq = dyn.magnetic_torque(c_br, prm["field_r"], m_ctrl)
+    t_mag = dyn.magnetic_torque(prm["m_res"] + ex["m_prof"], c_br @ prm["field_r"])
+    t_mtq = dyn.magnetic_torque(m_ctrl, c_br @ prm["field_r"])
     return t_gg, t_sol, t_mag, t_mtq
 
 

@@ -1,17 +1,18 @@
-"""Truth simulation: exogenous inputs, the compiled rollout, and its result.
+"""Truth simulation: the compiled rollout of the RK4 step over a run, window by window.
 
-``simulate_truth`` is the public entry point.  It evaluates the slowly varying
-inputs (Sun, shadow, field) on the whole output grid with vectorised numpy,
-draws the wheel ripple from the caller's generator, and rolls the compiled RK4
-step out (``rollout``: a C loop over the step, or ``mapaccum`` chunks in the VM):
-one Python call per piece of thousands of steps, none per step.
+``TruthStream`` is what every run flies: a window at a time, it evaluates the
+slowly varying inputs (Sun, shadow, field: ``sun_inputs``) on the window's grid
+with vectorised numpy, draws the wheel ripple from the caller's generator, and rolls
+the compiled step out (``rollout``: a C loop over the step, or ``mapaccum`` chunks in
+the VM), one Python call per piece of thousands of steps, none per step, carrying
+its state and generators to the next window.  ``simulate_truth`` rolls a whole run
+out at once (the tests and benchmarks).  The result is ``history.TruthResult``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import queue
-from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime
@@ -25,13 +26,12 @@ from . import ephemeris
 from .control import Control
 from .environment import Environment
 from .frames import GeoOrbit, dcm_from_quat, quat_from_euler312
+from .history import TruthResult, truth_result
 from .spacecraft import Spacecraft
-from .step import build_step, input_layout, pack_params, split_aux
+from .step import build_step, input_layout, pack_params
+from .sun_inputs import near_shadow, profiled, shadow_fine, step_inputs, sun_nodes, sun_on_grid
 
 DEFAULT_CHUNK = 4096
-# TruthResult.torques's sources, in truth.csv's column order.
-TORQUE_SOURCES = ("gravity_gradient", "solar", "magnetic", "magnetic_control", "wheel_control",
-                  "wheel_input", "wheel_ripple", "external")
 TAIL_CHUNK = 256  # a short run's or a long run's last steps, without 4096-step padding
 SENSE_PIECE = 4 * DEFAULT_CHUNK   # samples per sensing call while the rollout runs
 
@@ -62,63 +62,6 @@ class InitialState:
         return x0
 
 
-@dataclass(frozen=True)
-class TruthResult:
-    """Truth histories on the output grid (SI units, body axes unless named).
-
-    ``torques`` maps a source name to an (N, 3) body torque in N m:
-    gravity_gradient, solar, magnetic (residual and prescribed dipoles),
-    magnetic_control (the torquers), wheel_control (the reaction of the control's
-    motor torques on the body), wheel_input (of ``wheel_torque``), wheel_ripple
-    and external.  Torques are evaluated at each sample, the start of its step.
-    """
-
-    t_s: np.ndarray
-    q_br: np.ndarray
-    w_bn_radps: np.ndarray
-    w_br_radps: np.ndarray
-    wheel_speeds_radps: np.ndarray
-    h_Nms: np.ndarray
-    H_Nms: np.ndarray
-    torques: Mapping[str, np.ndarray]
-    wheel_command_Nm: np.ndarray
-    torquer_dipole_Am2: np.ndarray
-    sun_body: np.ndarray
-    sun_orbit_frame: np.ndarray
-    shadow: np.ndarray
-    final_state: np.ndarray
-    backend: str
-    euler_rad: np.ndarray  # (N, 3): yaw, roll, pitch (3-1-2)
-
-    @property
-    def yaw_rad(self) -> np.ndarray:
-        return self.euler_rad[:, 0]
-
-    @property
-    def roll_rad(self) -> np.ndarray:
-        return self.euler_rad[:, 1]
-
-    @property
-    def pitch_rad(self) -> np.ndarray:
-        return self.euler_rad[:, 2]
-
-    @property
-    def eclipse(self) -> np.ndarray:
-        return self.shadow < 1.0
-
-    def rows(self, lo: int, hi: int) -> TruthResult:
-        """Samples lo … hi−1 of this window, as views (``final_state`` is the state
-        after them only for the window's last piece)."""
-        cut = slice(lo, hi)
-        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        for name, v in fields.items():
-            if isinstance(v, np.ndarray) and name != "final_state":
-                fields[name] = v[cut]
-        fields["torques"] = self.torques.slice(lo, hi) if isinstance(self.torques, Torques) \
-            else {k: v[cut] for k, v in self.torques.items()}
-        return TruthResult(**fields)
-
-
 class TruthModel:
     """The compiled truth step for one wheel count, built once and reused."""
 
@@ -142,39 +85,6 @@ def truth_model(n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str = "auto"
     return TruthModel(n_wheels, chunk, backend)
 
 
-def step_inputs(t_s: np.ndarray, epoch: datetime, orbit: GeoOrbit, env: Environment,
-                sun: dict[str, np.ndarray], shadow: np.ndarray, out: dict[str, np.ndarray]
-                ) -> None:
-    """The Sun-driven step inputs of ``step.input_layout`` at the samples ``t_s``, from
-    the Sun there (``_sun_on_grid``) and the shadow (``TruthStream._shadow``), written
-    into ``out``'s arrays of those samples: ``sun_r``, ``sun_scale`` and, when the
-    magnetic profile is on, ``m_prof`` (``TruthStream._window_inputs`` sets the rest)."""
-    jd0 = ephemeris.julian_date(epoch)
-    alpha = orbit.right_ascension(t_s, ephemeris.gmst_rad(jd0))
-    # Satellite-to-Sun direction in the orbit frame.  The geocentric Sun, at right
-    # ascension λ and declination δ, is (ρ sin(λ−α), −sin δ, −ρ cos(λ−α)) in the frame
-    # of GeoOrbit.orbit_frame (ρ = cos δ); the satellite sits at −R ẑ_R, so d ŝ − r
-    # adds R to the z component (a parallax of up to R/AU = 0.016°).
-    phase = sun["ra"] - alpha
-    d, radius = sun["dist"], orbit.radius_m
-    d_cos_dec, cos_phase = d * sun["cos_dec"], np.cos(phase)   # each formed once
-    sun_r = out["sun_r"]
-    sun_r[:, 0] = d_cos_dec * np.sin(phase)
-    sun_r[:, 1] = -d * sun["sin_dec"]
-    sun_r[:, 2] = radius - d_cos_dec * cos_phase
-    # |d ŝ + R ẑ|² = d² + 2 d R ŝ_z + R²
-    sat_sun_dist = np.sqrt(d * (d - 2.0 * radius * sun["cos_dec"] * cos_phase) + radius**2)
-    sun_r /= sat_sun_dist[:, None]
-    np.multiply(shadow, (ephemeris.AU_M / sat_sun_dist) ** 2, out=out["sun_scale"])
-    if _profiled(env):
-        out["m_prof"][:] = env.magnetic.profile(t_s)
-
-
-def _profiled(env: Environment) -> bool:
-    mag = env.magnetic
-    return bool(mag.enabled and np.any(mag.profile_amplitude_Am2))
-
-
 def _checked(a: np.ndarray | None, shape: tuple[int, int], name: str) -> np.ndarray:
     if a is None:
         return np.zeros(shape)
@@ -184,72 +94,6 @@ def _checked(a: np.ndarray | None, shape: tuple[int, int], name: str) -> np.ndar
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name} contains NaN or infinity")
     return a
-
-
-def _sun_inertial(sun: dict[str, np.ndarray], idx) -> np.ndarray:
-    """Geocentric Sun unit vectors (inertial) at the given sample indices."""
-    ra, cd = sun["ra"][idx], sun["cos_dec"][idx]
-    return np.stack([cd * np.cos(ra), cd * np.sin(ra), sun["sin_dec"][idx]], axis=-1)
-
-
-def _near_shadow(alpha_c, sun, idx_c, radius, step_len) -> np.ndarray:
-    """The coarse pass: which coarse samples come within the penumbra's reach."""
-    r = radius * np.stack([np.cos(alpha_c), np.sin(alpha_c), np.zeros(len(alpha_c))], -1)
-    along = np.einsum("ij,ij->i", r, _sun_inertial(sun, idx_c))
-    perp = np.sqrt(np.maximum(radius**2 - along**2, 0.0))
-    reach = ephemeris.R_EARTH_M + 2.0 * radius * ephemeris.R_SUN_M / sun["dist"][idx_c] \
-        + step_len
-    return (along < step_len) & (perp < reach)
-
-
-def _shadow_fine(coarse, near, start, alpha, sun, radius, model, every) -> np.ndarray:
-    """Shadow of the samples ``start`` … ``start + len(alpha) − 1`` (``alpha`` and
-    ``sun`` hold those): the exact model within ``every`` samples of each flagged
-    coarse sample (global indices ``coarse``), 1 elsewhere."""
-    n = len(alpha)
-    out = np.ones(n)
-    if not np.any(near):
-        return out
-    fine = np.zeros(n, dtype=bool)
-    for g in coarse[near]:
-        fine[max(g - every - start, 0):max(g + every + 1 - start, 0)] = True
-    fine = np.flatnonzero(fine)
-    r_sat = radius * np.stack([np.cos(alpha[fine]), np.sin(alpha[fine]),
-                               np.zeros(len(fine))], -1)
-    out[fine] = ephemeris.shadow_factor(r_sat, _sun_inertial(sun, fine), sun["dist"][fine],
-                                        model=model)
-    return out
-
-
-SUN_EVERY = 128   # samples between ephemeris nodes (about a minute)
-
-
-def _sun_nodes(n: int, dt_s: float, jd0: float, every: int = SUN_EVERY):
-    """The ephemeris nodes of a run of ``n`` samples: their times and the Sun's right
-    ascension (unwrapped over the run), cos and sin of declination, and distance."""
-    idx = np.arange(0, n + every - 1, every)
-    idx[-1] = min(idx[-1], n - 1)
-    idx = np.unique(idx)
-    t_nodes = np.round(idx * dt_s, 9)   # the run's sample times there (simulate_truth)
-    unit, dist = ephemeris.sun_position_eci(jd0 + t_nodes / 86400.0)
-    return t_nodes, {"ra": np.unwrap(np.arctan2(unit[:, 1], unit[:, 0])),
-                     "cos_dec": np.hypot(unit[:, 0], unit[:, 1]), "sin_dec": unit[:, 2],
-                     "dist": dist}
-
-
-def _sun_on_grid(t_s: np.ndarray, nodes) -> dict[str, np.ndarray]:
-    """The Sun's right ascension, cos and sin of declination, and distance (m) at the
-    samples ``t_s``, interpolated linearly between the run's ephemeris ``nodes``
-    (``_sun_nodes``).
-
-    These slowly varying quantities need the ephemeris only every ``SUN_EVERY``
-    samples (about a minute): the Sun moves about 1e-5 rad a minute, so the error
-    (≈ angle²/8 ≈ 2e-11 rad) is far below the ephemeris's own 0.01°, and the
-    day-long evaluation costs almost nothing.  np.interp at a sample depends only on
-    the nodes either side, so a window gets the values the whole run has.
-    """
-    t_nodes, values = nodes
-    return {k: np.interp(t_s, t_nodes, v) for k, v in values.items()}
 
 
 class TruthStream:
@@ -291,7 +135,7 @@ class TruthStream:
         self.x = initial.state_vector(spacecraft, orbit)
         self.jd0 = ephemeris.julian_date(epoch)
         self.gmst0 = ephemeris.gmst_rad(self.jd0)
-        self.sun_nodes = _sun_nodes(n, dt_s, self.jd0)
+        self.sun_nodes = sun_nodes(n, dt_s, self.jd0)
         self.next_start = 0
 
     def retrim(self, solar) -> None:
@@ -321,17 +165,17 @@ class TruthStream:
         step_len = radius * abs(ends[1] - ends[0])
         coarse = np.arange(max(a - every, 0) // every * every, min(b + every, n), every)
         t_c = self._t(coarse)
-        sun_c = _sun_on_grid(t_c, self.sun_nodes)
-        near = _near_shadow(self.orbit.right_ascension(t_c, self.gmst0), sun_c,
+        sun_c = sun_on_grid(t_c, self.sun_nodes)
+        near = near_shadow(self.orbit.right_ascension(t_c, self.gmst0), sun_c,
                             np.arange(len(coarse)), radius, step_len)
-        return _shadow_fine(coarse, near, a, alpha, sun, radius, model, every)
+        return shadow_fine(coarse, near, a, alpha, sun, radius, model, every)
 
     def _window_inputs(self, a: int, b: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
         """Arrays of samples a … b−1 for the step inputs and the shadow: what is known
         without computing set (zeros, the caller's torques), the rest for ``_fill``."""
         n, nw = b - a, self.spacecraft.n_wheels
         inputs = {"sun_r": np.empty((n, 3)), "sun_scale": np.empty(n),
-                  "m_prof": np.empty((n, 3)) if _profiled(self.environment)
+                  "m_prof": np.empty((n, 3)) if profiled(self.environment)
                   else np.zeros((n, 3)),
                   "n_ext": np.zeros((n, 3)) if self.extra_torque is None
                   else self.extra_torque[a:b],
@@ -346,7 +190,7 @@ class TruthStream:
         the run; ``t_s`` their times), and with ``ripple`` draw their ripple: pieces
         drawn in order continue the generator's one stream as a whole draw would."""
         cut = slice(lo, hi)
-        sun = _sun_on_grid(t_s, self.sun_nodes)
+        sun = sun_on_grid(t_s, self.sun_nodes)
         alpha = self.orbit.right_ascension(t_s, self.gmst0)
         shadow[cut] = self._shadow(a + lo, a + hi, alpha, sun)
         step_inputs(t_s, self.epoch, self.orbit, self.environment, sun, shadow[cut],
@@ -417,8 +261,8 @@ class TruthStream:
                     todo.put((lo, hi))
             finally:
                 todo.put(None)
-            result = _result(t_s, states, aux, inputs, shadow, self.spacecraft,
-                             self.model.backend)
+            result = truth_result(t_s, states, aux, inputs, shadow, self.spacecraft,
+                                  self.model.backend)
             for lo, hi in bounds:
                 if done.get() is None:
                     break
@@ -436,7 +280,8 @@ class TruthStream:
                                      "unstable for these gains and this step")
         self.x = states[-1].copy()
         self.next_start = a + len(t_s)
-        return _result(t_s, states, aux, inputs, shadow, self.spacecraft, self.model.backend)
+        return truth_result(t_s, states, aux, inputs, shadow, self.spacecraft,
+                            self.model.backend)
 
 
 def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environment,
@@ -457,71 +302,3 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
     stream = TruthStream(spacecraft, orbit, environment, control, initial, epoch, duration_s,
                          dt_s, rng, extra_torque, wheel_torque, model)
     return stream.window(0, stream.n_samples)
-
-
-class Torques(Mapping):
-    """``TruthResult.torques``: body torques by source, (N, 3) each.  The wheel
-    motors' reactions on the body (``_reaction``) are formed when first asked for,
-    since only the files read them, and ``rows`` forms them on chosen samples
-    alone: a run writing every 125th sample never builds the others."""
-
-    def __init__(self, ready: dict[str, np.ndarray], reactions: dict[str, np.ndarray],
-                 axes: np.ndarray, order: tuple[str, ...]):
-        self._ready, self._reactions, self._axes, self._order = \
-            dict(ready), dict(reactions), axes, order
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        if name not in self._ready:
-            if name not in self._reactions:
-                raise KeyError(name)
-            self._ready[name] = _reaction(self._reactions.pop(name), self._axes)
-        return self._ready[name]
-
-    def __iter__(self):
-        return iter(self._order)
-
-    def __len__(self) -> int:
-        return len(self._order)
-
-    def slice(self, lo: int, hi: int) -> Torques:
-        """Samples lo … hi−1, still formed only when read."""
-        cut = slice(lo, hi)
-        return Torques({k: v[cut] for k, v in self._ready.items()},
-                       {k: v[cut] for k, v in self._reactions.items()}, self._axes,
-                       self._order)
-
-    def rows(self, idx: np.ndarray) -> dict[str, np.ndarray]:
-        """Every torque at the samples ``idx``: the rows of the whole arrays, bit for
-        bit (a reaction is a per-row sum)."""
-        return {name: self._ready[name][idx] if name in self._ready
-                else _reaction(self._reactions[name][idx], self._axes)
-                for name in self._order}
-
-
-def _reaction(motor_Nm: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    """Body torque −Σ_i u_i a_i of the wheel motor torques (N, n) on axes (n, 3).
-    Summed wheel by wheel, not by a BLAS product: BLAS kernels treat the rows of a
-    block and of its tail differently (fused or not), so a row's bits would depend on
-    how long the window holding it is."""
-    out = np.zeros((len(motor_Nm), 3))
-    for i in range(axes.shape[0]):
-        out -= motor_Nm[:, i:i + 1] * axes[i]
-    return out
-
-
-def _result(t_s, states, aux, inputs, shadow, spacecraft, backend) -> TruthResult:
-    n = spacecraft.n_wheels
-    a = split_aux(aux, n)
-    x = states[:-1]
-    axes = spacecraft.wheel_axes
-    torques = Torques(
-        {"gravity_gradient": a["t_gg"], "solar": a["t_solar"], "magnetic": a["t_mag"],
-         "magnetic_control": a["t_mtq"], "external": inputs["n_ext"]},
-        {"wheel_control": a["u_cmd"], "wheel_input": inputs["u_wheel"],
-         "wheel_ripple": inputs["ripple"]}, axes, TORQUE_SOURCES)
-    return TruthResult(
-        t_s=t_s, q_br=x[:, 0:4], w_bn_radps=x[:, 4:7], w_br_radps=a["w_br"],
-        wheel_speeds_radps=x[:, 7:], h_Nms=a["h"], H_Nms=a["H"], torques=torques,
-        wheel_command_Nm=a["u_cmd"], torquer_dipole_Am2=a["m_cmd"], sun_body=a["sun_b"],
-        sun_orbit_frame=inputs["sun_r"], shadow=shadow, final_state=states[-1],
-        backend=backend, euler_rad=a["euler"])

@@ -18,7 +18,7 @@ import pytest
 
 # The repository's folders install as dynprop.sim, dynprop.scenarios, ... (no generic
 # top-level names in a user's environment).  The tests keep their short imports
-# (``from scenarios.loader import ...``): each is the installed dynprop module itself,
+# (``from scenarios.config.loader import ...``): each is the installed dynprop module itself,
 # never a second copy of it (which would make two ScenarioError classes, two caches).
 ALIASED = ("sim", "estimator", "scenarios", "plots", "rollout", "eom")
 

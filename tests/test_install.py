@@ -33,7 +33,8 @@ def test_the_wheel_installs_only_the_dynprop_namespace_and_resists_shadowing(tmp
     tops = {n.split("/")[0] for n in zipfile.ZipFile(wheel).namelist()}
     assert tops == {"dynprop", wheel.name.split("-py3")[0] + ".dist-info"}
     names = zipfile.ZipFile(wheel).namelist()
-    assert "dynprop/py.typed" in names and "dynprop/scenarios/goes_next_equinox.yaml" in names
+    assert "dynprop/py.typed" in names
+    assert "dynprop/scenarios/bundled/goes_next_equinox.yaml" in names
     assert any(n.endswith("dist-info/licenses/LICENSE") or n.endswith("dist-info/LICENSE")
                for n in names)
 

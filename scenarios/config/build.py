@@ -1,4 +1,6 @@
-"""Turn a validated scenario into the simulator's parameter objects and seeds."""
+"""Turn a validated scenario into the simulator's and the estimator's parameter
+objects, its truth stream and its seeded random streams: the one place where a
+scenario's keys become ``sim`` and ``estimator`` objects."""
 
 from __future__ import annotations
 
@@ -8,11 +10,11 @@ import numpy as np
 from dynprop.estimator.model import ModelParams, ProcessNoise
 from dynprop.sim import control, environment, ephemeris, sensors, spacecraft
 from dynprop.sim.frames import GeoOrbit
-from dynprop.sim.truth import InitialState
+from dynprop.sim.truth import InitialState, TruthStream
 
-from .schema import Scenario, SunHead
-
-DEG = np.pi / 180.0
+from ..units import DEG
+from .schema import Scenario
+from .sections import SunHead
 
 # Every random stream of a run, in a fixed order: stream i of run k is seeded by
 # SeedSequence(seed, spawn_key=(k, i)), exactly what SeedSequence(seed).spawn()
@@ -118,5 +120,14 @@ def estimator_sensor_specs(s: Scenario):
 
 def yaw_factors(s: Scenario) -> np.ndarray:
     """k_i with h = Σ k_i Ω_i: each wheel's spin inertia times its axis's z component."""
-    sc = build_spacecraft(s)
-    return sc.wheel_inertias * sc.wheel_axes[:, 2]
+    return build_spacecraft(s).momentum_factors(2)
+
+
+def truth_stream(s: Scenario, rng: np.random.Generator, duration_s: float | None = None,
+                 dt_s: float | None = None, model=None) -> TruthStream:
+    """The truth of ``s`` as a stream of windows (``sim.truth.TruthStream``), its wheel
+    ripple drawn from ``rng``; ``duration_s`` and ``dt_s`` default to the scenario's."""
+    return TruthStream(build_spacecraft(s), orbit(s), build_environment(s), build_control(s),
+                       build_initial(s), epoch(s),
+                       s.duration_s if duration_s is None else duration_s,
+                       s.sample_interval_s if dt_s is None else dt_s, rng=rng, model=model)

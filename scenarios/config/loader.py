@@ -1,4 +1,4 @@
-"""Load, override and validate scenarios; write them back fully resolved.
+"""Load, override and validate scenarios (``schema.resolved_yaml`` writes them back).
 
 Every failure is a ``ScenarioError`` holding every problem found, one line each,
 and each line names the key path (or the file) and, for a misspelt key, the
@@ -7,7 +7,6 @@ closest valid key.  The CLI prints them before exiting with status 2.
 
 from __future__ import annotations
 
-import difflib
 import re
 import typing
 from importlib import resources
@@ -17,9 +16,9 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from .. import __version__
 from .montecarlo import DISTRIBUTION_TAGS, Normal, Uniform
 from .schema import Scenario
+from .suggestions import cap_lines, did_you_mean
 
 
 class ScenarioError(ValueError):
@@ -133,9 +132,6 @@ def apply_override(raw: dict, assignment: str) -> None:
     node[keys[-1]] = _parse_yaml(text, f"--set {path}")
 
 
-MAX_PROBLEM_LINES = 10
-
-
 def _union_label(part) -> bool:
     return isinstance(part, str) and (part in DISTRIBUTION_TAGS or part == "float"
                                       or part.startswith("tuple["))
@@ -161,25 +157,6 @@ def _model_at(loc: tuple) -> type[BaseModel] | None:
             parts.pop(0)  # the user's key (a dispersed key path)
             model = None
     return model if isinstance(model, type) and issubclass(model, BaseModel) else None
-
-
-def closest(word: str, candidates) -> str | None:
-    """The valid name a misspelt ``word`` most likely meant, if any is close.
-
-    difflib's ratio catches transpositions and small slips (``nmae`` → ``name``);
-    a key written without its unit suffix (``inertia`` → ``inertia_kgm2``) is
-    caught by its prefix even where the ratio is low."""
-    candidates = [str(c) for c in candidates]
-    match = difflib.get_close_matches(str(word), candidates, n=1, cutoff=0.6)
-    if match:
-        return match[0]
-    prefixed = [c for c in candidates if c.startswith(f"{word}_")]
-    return prefixed[0] if len(prefixed) == 1 else None
-
-
-def did_you_mean(word: str, candidates) -> str:
-    match = closest(word, candidates)
-    return f"; did you mean '{match}'?" if match else ""
 
 
 def problem_lines(exc: ValidationError) -> list[str]:
@@ -219,14 +196,6 @@ def problem_lines(exc: ValidationError) -> list[str]:
     return out
 
 
-def cap_lines(lines: list[str], limit: int = MAX_PROBLEM_LINES) -> list[str]:
-    """At most ``limit`` lines; the last says how many more were found."""
-    if len(lines) <= limit:
-        return lines
-    more = len(lines) - (limit - 1)
-    return lines[:limit - 1] + [f"... and {more} more problems"]
-
-
 def format_error(exc: ValidationError) -> str:
     """Every problem, one line each (at most MAX_PROBLEM_LINES)."""
     return "\n".join(cap_lines(problem_lines(exc)))
@@ -256,11 +225,3 @@ def load_scenario(source: str | Path, overrides: list[str] = ()) -> Scenario:
     if problems:
         raise ScenarioError("\n".join(cap_lines(problems)))
     return scenario
-
-
-def resolved_yaml(scenario: Scenario) -> str:
-    """Every key with its value, defaults filled, stamped with this version; loads
-    back to the same scenario."""
-    data = scenario.model_dump(mode="json")
-    data["dynprop_version"] = __version__
-    return yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)

@@ -1,8 +1,8 @@
 """Render docs/scenario-reference.md from the schema, so the two cannot drift.
 
-    python -m dynprop.scenarios.reference --out docs/scenario-reference.md   # or: make docs
-    python -m dynprop.scenarios.reference --check docs/scenario-reference.md # exit 1 if stale
-    python -m dynprop.scenarios.reference                                    # to stdout
+    python -m dynprop.scenarios.config.reference --out docs/scenario-reference.md  # make docs
+    python -m dynprop.scenarios.config.reference --check docs/scenario-reference.md  # stale: 1
+    python -m dynprop.scenarios.config.reference                                   # to stdout
 
 Everything in the document is read from the schema, not restated:
 
@@ -33,13 +33,13 @@ from pydantic import BaseModel, ValidationError
 from pydantic.fields import FieldInfo
 from pydantic.types import Strict
 
-from .loader import MAX_PROBLEM_LINES
 from .schema import Scenario
+from .suggestions import MAX_PROBLEM_LINES
 
 HEADER = """# Scenario reference
 
-Generated from the schema (`scenarios/schema.py`, `scenarios/montecarlo/schema.py`) by
-`python -m dynprop.scenarios.reference --out docs/scenario-reference.md` (`make docs`); do not edit.
+Generated from the schema (`scenarios/config/`) by `python -m
+dynprop.scenarios.config.reference --out docs/scenario-reference.md` (`make docs`); do not edit.
 
 A scenario is a YAML mapping.
 {required}
@@ -339,7 +339,7 @@ def render() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m dynprop.scenarios.reference",
+    parser = argparse.ArgumentParser(prog="python -m dynprop.scenarios.config.reference",
                                      description=__doc__.splitlines()[0])
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--out", type=Path, help="write the document here")
@@ -348,8 +348,9 @@ def main(argv: list[str] | None = None) -> int:
     text = render()
     if args.check:
         if not args.check.exists() or args.check.read_text() != text:
-            print(f"{args.check} is stale: regenerate with `python -m dynprop.scenarios.reference "
-                  f"--out {args.check}` (or `make docs`)", file=sys.stderr)
+            print(f"{args.check} is stale: regenerate with `python -m "
+                  f"dynprop.scenarios.config.reference --out {args.check}` (or `make docs`)",
+                  file=sys.stderr)
             return 1
         return 0
     if args.out:

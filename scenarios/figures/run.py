@@ -1,4 +1,5 @@
-"""`dynprop plot DIR`: read a run directory's files and hand arrays to ``plots``.
+"""The figures of a run directory (`dynprop run`, `estimate`, `simulate`, and
+`dynprop plot DIR`): read its files and hand arrays to ``plots``.
 
 A `run` or `estimate` directory is drawn from scenario.yaml and comparison.npz
 alone, by ``plot_run_figures``, which both the commands and `dynprop plot` call:
@@ -31,6 +32,7 @@ from dynprop.plots.truth import plot_truth
 from ..files.csvio import read_csv
 from ..files.rundir import RunDirError
 from ..workers import worker_pool
+from . import save_figure
 
 # Columns of the comparison arrays: the model's state indices (estimator.model).
 COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
@@ -40,17 +42,6 @@ UNITS = {"roll": "deg", "yaw": "deg", "h": "N m s"}
 RUN_FIGURES = ("errors.png", "estimates.png", "consistency.png", "torques.png",
                "telemetry_overview.png", "season.png", "trim_loop.png")
 SIMULATE_FIGURES = ("truth.png", "telemetry.png")
-
-
-def save_figure(fig, path: Path) -> Path:
-    # Write beside the target and rename, so a figure is never half written.
-    tmp = path.with_name(f".{path.name}.tmp")
-    # zlib level 1: a quarter of the encoding time for files ~10% larger.
-    fig.savefig(tmp, dpi=120, format="png", pil_kwargs={"compress_level": 1})
-    os.replace(tmp, path)
-    import matplotlib.pyplot as plt
-    plt.close(fig)
-    return path
 
 
 def _draw(job) -> Path:
@@ -74,9 +65,9 @@ def figure_set(keys) -> list[str]:
 
 def _dss_note(scenario: dict) -> str | None:
     """Why yaw NIS is small in DSS periods, with the filter's σ inflation for the DSS
-    (``pipeline.yaw_correlation_inflation``, the function the filter used)."""
+    (``bridge.inputs.yaw_correlation_inflation``, the function the filter used)."""
+    from ..bridge.inputs import yaw_correlation_inflation
     from ..config.loader import validate
-    from ..run.whole import yaw_correlation_inflation
     s = validate(scenario)
     factor = float(np.sqrt(yaw_correlation_inflation(s, [0.0])[0]))
     if factor <= 1.0:

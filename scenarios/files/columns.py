@@ -1,4 +1,4 @@
-"""Column definitions of truth.csv and telemetry.csv (docs/outputs.md).
+"""Column definitions of truth.csv, telemetry.csv and estimate.csv (docs/outputs.md).
 
 Degrees and rpm appear only here, at the I/O boundary, with the unit in each
 column name.  Missing values are NaN and are written as empty fields.
@@ -8,8 +8,28 @@ from __future__ import annotations
 
 import numpy as np
 
-RAD2DEG = 180.0 / np.pi
-RADPS2RPM = 60.0 / (2.0 * np.pi)
+from ..units import RAD2DEG, RADPS2RPM
+
+# Estimate columns: state name with its unit, and the factor from model units
+# (ṙ/ω_n and ẏ/ω_n are written as rates in deg/s).
+STATE_COLUMNS = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms",
+                 "N_px_Nm", "N_pz_Nm", "N_cx_Nm", "N_cz_Nm")
+
+
+def display_factors(omega_n: float) -> np.ndarray:
+    """Model units (Eq. 10) to estimate.csv's units, per state."""
+    return np.array([RAD2DEG, RAD2DEG * omega_n, RAD2DEG, RAD2DEG * omega_n, 1, 1, 1, 1, 1])
+
+
+def estimate_columns(t_s, x, sigma, omega_n: float) -> dict[str, np.ndarray]:
+    """estimate.csv's columns: time, the 9 states and their 1σ."""
+    f = display_factors(omega_n)
+    cols = {"t_s": t_s}
+    for k, name in enumerate(STATE_COLUMNS):
+        cols[name] = x[:, k] * f[k]
+    for k, name in enumerate(STATE_COLUMNS):
+        cols[f"sigma_{name}"] = sigma[:, k] * abs(f[k])
+    return cols
 
 
 def truth_columns(result, sun_visible: np.ndarray, rows: np.ndarray | None = None
@@ -19,7 +39,7 @@ def truth_columns(result, sun_visible: np.ndarray, rows: np.ndarray | None = Non
     eclipse, not noise); ``shadow`` is the visible fraction of the solar disc.
     Torques are ``<source>_{x,y,z}_Nm``, body axes, at each sample.  With ``rows``,
     those samples only: the same values, the torques formed there alone
-    (``sim.truth.Torques.rows``)."""
+    (``sim.history.Torques.rows``)."""
     cols = _state_columns(result, sun_visible)
     if rows is None:
         torques = result.torques

@@ -1,8 +1,8 @@
 """comparison.npz: the series every run figure is drawn from, float32 (drawing only).
 
-The figures (``scenarios.plotting``) read nothing else besides scenario.yaml, so
+The figures (``figures.run``) read nothing else besides scenario.yaml, so
 ``dynprop plot`` redraws exactly what ``run`` (or ``estimate``) drew, and which
-figures exist follows from which keys are here (``plotting.figure_set``).
+figures exist follows from which keys are here (``figures.run.figure_set``).
 
 Keys (time first, N samples; state columns in ``estimator.model`` order, in
 display units: deg, deg/s, N m s, N m; written only when their inputs exist):
@@ -25,11 +25,14 @@ display units: deg, deg/s, N m s, N m; written only when their inputs exist):
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 from dynprop.estimator.consistency import nis
 from dynprop.estimator.model import H_WHEEL, R, Y
 
-from .summary import RAD2DEG, display_factors
+from ..units import RAD2DEG
+from .columns import display_factors
 
 #: telemetry.csv columns the telemetry figure draws (besides every wheelK_rpm).
 TELEMETRY_COLUMNS = ("roll_deg", "pitch_deg", "yaw_deg", "yaw_sigma_deg", "sun_head")
@@ -49,35 +52,51 @@ def _telemetry_arrays(telemetry: dict, n: int) -> dict[str, np.ndarray]:
     return out
 
 
-def comparison_arrays(runs, t_s, yaw_present, nees_data,
+@dataclass(frozen=True)
+class ComparisonInputs:
+    """What comparison.npz is drawn from, on its rows (model coordinates, rad): the
+    paper filter's history ``real`` (x, sigma, innovations, innovation_var) and the
+    ω_n of its model always; the truth in the model's states, the smoothed estimate,
+    the twin's filter estimate with the twin's states, the true 3-1-2 angles (yaw,
+    roll, pitch) and the filters beside the paper's (by name: x, sigma) each when
+    the run has them."""
+
+    omega_n: float
+    real: object
+    truth_model: np.ndarray | None = None
+    smoothed_x: np.ndarray | None = None
+    linear_x: np.ndarray | None = None
+    twin_model: np.ndarray | None = None
+    true_euler_rad: np.ndarray | None = None
+    filters: dict = field(default_factory=dict)
+
+
+def comparison_arrays(c: ComparisonInputs, t_s, yaw_present, nees_data,
                       telemetry: dict | None = None) -> dict[str, np.ndarray]:
     """Everything the run figures need, full resolution, float32 (drawing only).
-
-    ``runs``: ``params`` and ``real`` always; ``smoothed``, ``linear`` with
-    ``twin_model``, ``truth_model`` and ``sim`` (``sim.truth.euler_rad``, (N, 3)
-    yaw, roll, pitch in rad) each may be None.  ``nees_data`` = (indices, real NEES
-    or None, linear NEES or None).  ``telemetry``: the telemetry.csv columns on the
-    filter's samples (as read back), or None."""
-    f = display_factors(runs.params.omega_n_radps)
+    ``nees_data`` = (indices, real NEES or None, linear NEES or None).
+    ``telemetry``: the telemetry.csv columns on the filter's samples (as read back),
+    or None."""
+    f = display_factors(c.omega_n)
     n = len(t_s)
-    real = runs.real
+    real = c.real
     out = {"t_s": np.asarray(t_s, dtype=float),
            "yaw_present": np.asarray(yaw_present, dtype=np.float32),
            "x_real": real.x * f, "sigma": real.sigma * np.abs(f),
            "nis_real": nis(real.innovations, real.innovation_var)}
-    truth = runs.truth_model is not None
-    twin = runs.linear is not None and runs.twin_model is not None
+    truth = c.truth_model is not None
+    twin = c.linear_x is not None and c.twin_model is not None
     if truth:
-        err = real.x - runs.truth_model
-        out.update(truth_model=runs.truth_model * f, err_real=err * f)
-        if runs.smoothed is not None:
-            out["err_smoothed"] = (runs.smoothed.x - runs.truth_model) * f
-        for name, res in (getattr(runs, "extra", None) or {}).items():
+        err = real.x - c.truth_model
+        out.update(truth_model=c.truth_model * f, err_real=err * f)
+        if c.smoothed_x is not None:
+            out["err_smoothed"] = (c.smoothed_x - c.truth_model) * f
+        for name, res in c.filters.items():
             # A filter besides the paper's (estimator.filters), on the same telemetry.
-            out[f"err_{name}"] = (res.x - runs.truth_model) * f
+            out[f"err_{name}"] = (res.x - c.truth_model) * f
             out[f"sigma_{name}"] = res.sigma * np.abs(f)
     if twin:
-        err_lin = runs.linear.x - runs.twin_model
+        err_lin = c.linear_x - c.twin_model
         out["err_linear"] = err_lin * f
         if truth:
             cols = list(DIFF_STATES)
@@ -88,8 +107,8 @@ def comparison_arrays(runs, t_s, yaw_present, nees_data,
             series = np.full(n, np.nan)
             series[idx] = values
             out[key] = series
-    if runs.sim is not None:
-        out["true_euler_deg"] = runs.sim.truth.euler_rad * RAD2DEG  # yaw, roll, pitch
+    if c.true_euler_rad is not None:
+        out["true_euler_deg"] = c.true_euler_rad * RAD2DEG  # yaw, roll, pitch
     if telemetry is not None:
         out.update(_telemetry_arrays(telemetry, n))
     return {k: (v if k == "t_s" else np.asarray(v, dtype=np.float32)) for k, v in out.items()}

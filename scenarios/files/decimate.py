@@ -19,28 +19,22 @@ from __future__ import annotations
 import shutil
 import zipfile
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
-from dynprop.estimator.model import H_WHEEL, R, Y
 
-from .comparison import comparison_arrays
-from .summary import NEES_STRIDE, display_factors
+from ..records import FilterHistory, Window
+from ..samples import output_rows
+from .columns import display_factors
+from .comparison import DIFF_STATES, ComparisonInputs, comparison_arrays
 
 ENVELOPED = ("err_real", "err_linear", "err_real_minus_linear", "err_smoothed",
              "nees_real", "nees_linear")
-DIFF_COLS = [R, Y, H_WHEEL]
+DIFF_COLS = list(DIFF_STATES)
 
 
-def output_rows(start: int, stop: int, stride: int) -> np.ndarray:
-    """Global sample indices of the output rows within [start, stop)."""
-    return np.arange(-(-start // stride) * stride, stop, stride)
-
-
-def _at(result, k) -> SimpleNamespace:
-    return SimpleNamespace(x=result.x[k], sigma=result.sigma[k],
-                           innovations=result.innovations[k],
-                           innovation_var=result.innovation_var[k])
+def _at(h: FilterHistory, k) -> FilterHistory:
+    return FilterHistory(h.x[k], None if h.sigma is None else h.sigma[k], h.innovations[k],
+                         h.innovation_var[k], h.backend)
 
 
 class ComparisonRows:
@@ -74,60 +68,49 @@ class ComparisonRows:
                 m.flush()
                 self.maps[key] = True
 
-    def add(self, rec: dict, nees_idx, nees_real, nees_lin, extra=(), err=None,
-            err_lin=None) -> None:
+    def add(self, w: Window, nees_idx, err=None, err_lin=None) -> None:
         """One window's rows; ``err`` and ``err_lin`` (x̂ − truth of the real filter and
         of the twin's) when the caller has them already."""
-        a = rec["start"]
-        n = len(rec["t_s"])
+        a = w.start
+        n = len(w.t_s)
         rows = output_rows(a, a + n, self.stride)
         k = rows - a
         at_nees = np.isin(rows, nees_idx)
         pick = np.searchsorted(nees_idx, rows[at_nees])
-        runs = SimpleNamespace(
-            params=rec["params"], real=_at(rec["real"], k),
-            smoothed=None if rec.get("smoothed") is None else SimpleNamespace(
-                x=rec["smoothed"].x[k]),
-            linear=None if rec.get("linear") is None else SimpleNamespace(
-                x=rec["linear"].x[k]),
-            truth_model=rec["truth_model"][k],
-            twin_model=None if rec.get("twin_model") is None else rec["twin_model"][k],
-            sim=SimpleNamespace(truth=SimpleNamespace(euler_rad=rec["euler_rows"])),
-            extra={name: SimpleNamespace(x=rec[name].x[k], sigma=rec[name].sigma[k])
-                   for name in extra})
-        present = np.isfinite(rec["meas"][1][k])
-        nees_data = (np.flatnonzero(at_nees), nees_real[pick],
-                     None if nees_lin is None else nees_lin[pick])
-        arrays = comparison_arrays(runs, rec["t_s"][k], present, nees_data, rec["tel_rows"])
+        c = ComparisonInputs(
+            w.params.omega_n_radps, _at(w.real, k), truth_model=w.truth_model[k],
+            smoothed_x=None if w.smoothed_x is None else w.smoothed_x[k],
+            linear_x=w.linear.x[k], twin_model=w.twin_model[k], true_euler_rad=w.euler_rows,
+            filters={name: _at(h, k) for name, h in w.filters.items()})
+        present = np.isfinite(w.measured.yaw_rad[k])
+        nees_data = (np.flatnonzero(at_nees), w.nees_real[pick], w.nees_linear[pick])
+        arrays = comparison_arrays(c, w.t_s[k], present, nees_data, w.tel_rows)
         lo = rows[0] // self.stride if len(rows) else None
         for key, v in arrays.items():
             if lo is not None:
                 self._map(key, v.shape[1:], v.dtype)[lo:lo + len(rows)] = v
         if self.stride > 1:
-            self._envelopes(rec, a, n, nees_idx, nees_real, nees_lin, err, err_lin)
+            self._envelopes(w, a, n, nees_idx, err, err_lin)
         self._release()
 
-    def _envelopes(self, rec, a, n, nees_idx, nees_real, nees_lin, err=None,
-                   err_lin=None) -> None:
+    def _envelopes(self, w: Window, a, n, nees_idx, err=None, err_lin=None) -> None:
         # Rounding keeps order, so the least of f·v over an interval is f times the
         # least of v when f > 0 (its greatest when f < 0: the rates' factor has
         # ω_n's sign), the same double.  So each series is scaled after its
         # reduction, on the rows kept, not before.
-        f = display_factors(rec["params"].omega_n_radps)
+        f = display_factors(w.params.omega_n_radps)
         samples = np.arange(a, a + n)
         if err is None:
-            err = rec["real"].x - rec["truth_model"]
-        series = {"err_real": (samples, err, f)}
-        if rec.get("linear") is not None:
-            if err_lin is None:
-                err_lin = rec["linear"].x - rec["twin_model"]
-            series["err_linear"] = (samples, err_lin, f)
-            series["err_real_minus_linear"] = (samples, (err - err_lin)[:, DIFF_COLS],
-                                               f[DIFF_COLS])
-            series["nees_linear"] = (nees_idx, nees_lin, None)
-        if rec.get("smoothed") is not None:
-            series["err_smoothed"] = (samples, rec["smoothed"].x - rec["truth_model"], f)
-        series["nees_real"] = (nees_idx, nees_real, None)
+            err = w.real.x - w.truth_model
+        if err_lin is None:
+            err_lin = w.linear.x - w.twin_model
+        series = {"err_real": (samples, err, f), "err_linear": (samples, err_lin, f),
+                  "err_real_minus_linear": (samples, (err - err_lin)[:, DIFF_COLS],
+                                            f[DIFF_COLS]),
+                  "nees_linear": (nees_idx, w.nees_linear, None)}
+        if w.smoothed_x is not None:
+            series["err_smoothed"] = (samples, w.smoothed_x - w.truth_model, f)
+        series["nees_real"] = (nees_idx, w.nees_real, None)
         for key, (idx, v, scale) in series.items():
             if len(idx) == 0:
                 continue
@@ -162,5 +145,3 @@ class ComparisonRows:
         shutil.rmtree(self.folder)
         tmp.replace(path)
 
-
-__all__ = ["ENVELOPED", "NEES_STRIDE", "ComparisonRows", "output_rows"]

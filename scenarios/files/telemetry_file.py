@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..config import build
-from ..config.loader import cap_lines, closest
 from ..config.schema import Scenario
+from ..config.suggestions import cap_lines, closest
 from .csvio import read_csv
 from .rundir import RunDirError
 

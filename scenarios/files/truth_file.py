@@ -3,36 +3,47 @@
 The file holds what the run's truth arrays hold, at 10 significant digits
 (``csvio``): attitude, ω_BN, wheel momentum h and every torque by source.  From
 those the model states are rebuilt exactly as `run` builds them from the arrays
-(``pipeline.truth_torques`` and ``model_truth``), so errors computed from the file
+(``bridge.coordinates.truth_torques`` and ``model_truth``), so errors computed from the file
 agree with the run's to the file's precision (5e-10 relative).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
-from dynprop.sim.frames import dcm_from_euler312
+from dynprop.sim.frames import dcm_from_euler312, rate_wrt_orbit
+from dynprop.sim.history import EXTERNAL_TORQUES, Euler312
 
 from ..config import build
 from ..config.schema import Scenario
-from ..run.whole import EXTERNAL
+from ..units import DEG
 from .rundir import RunDirError
 from .telemetry_file import read_input_csv
 
-DEG = np.pi / 180.0
 ATTITUDE = ("t_s", "yaw_deg", "roll_deg", "pitch_deg", "wx_radps", "wy_radps", "wz_radps",
             "h_Nms")
 
 
-def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> SimpleNamespace:
-    """The truth at the filter's grid times ``t_grid`` (every one must have a row):
-    the arrays ``pipeline.truth_torques`` and ``model_truth`` read, and ``euler_rad``
-    (yaw, roll, pitch) for the figures."""
+@dataclass(frozen=True)
+class TruthFromFile(Euler312):
+    """truth.csv at the filter's grid times: what ``bridge.coordinates.truth_torques``
+    and ``model_truth`` read of a truth, and ``euler_rad`` (yaw, roll, pitch) for the
+    figures.  ``torques`` holds the external sources (``sim.history.EXTERNAL_TORQUES``)."""
+
+    t_s: np.ndarray
+    euler_rad: np.ndarray
+    w_br_radps: np.ndarray
+    h_Nms: np.ndarray
+    torques: dict[str, np.ndarray]
+
+
+def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
+    """The truth at the filter's grid times ``t_grid`` (every one must have a row)."""
     path = Path(path)
     cols = read_input_csv(path, "truth")
-    torque_cols = [f"{src}_{a}_Nm" for src in EXTERNAL for a in "xyz"]
+    torque_cols = [f"{src}_{a}_Nm" for src in EXTERNAL_TORQUES for a in "xyz"]
     missing = [c for c in (*ATTITUDE, *torque_cols) if c not in cols]
     if missing:
         raise RunDirError("\n".join(f"{path}: missing column {c}" for c in missing))
@@ -51,10 +62,8 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> SimpleNamespace:
     at = {name: values[where] for name, values in cols.items()}
     euler = np.column_stack([at["yaw_deg"], at["roll_deg"], at["pitch_deg"]]) * DEG
     w_bn = np.column_stack([at["wx_radps"], at["wy_radps"], at["wz_radps"]])
-    # ω_BN = ω_BR + C_BR ω_RN, with the orbit frame turning at −ω0 about y_R.
     c_br = dcm_from_euler312(euler[:, 0], euler[:, 1], euler[:, 2])
-    w_br = w_bn + build.orbit(s).rate_radps * c_br[:, :, 1]
-    torques = {src: np.column_stack([at[f"{src}_{a}_Nm"] for a in "xyz"]) for src in EXTERNAL}
-    return SimpleNamespace(t_s=t_grid, euler_rad=euler, yaw_rad=euler[:, 0],
-                           roll_rad=euler[:, 1], pitch_rad=euler[:, 2], w_br_radps=w_br,
-                           h_Nms=at["h_Nms"], torques=torques)
+    w_br = rate_wrt_orbit(c_br, w_bn, build.orbit(s).rate_radps)
+    torques = {src: np.column_stack([at[f"{src}_{a}_Nm"] for a in "xyz"])
+               for src in EXTERNAL_TORQUES}
+    return TruthFromFile(t_grid, euler, w_br, at["h_Nms"], torques)

@@ -11,16 +11,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from dynprop.eom.linear import eq5_inertia
 from dynprop.estimator.consistency import chi2_bounds, fraction_inside, nees
 from dynprop.estimator.kalman import unpack
 from dynprop.estimator.model import N_STATES, R, Y
 
 from ..config import build
 from ..config.schema import Scenario
-from ..files.summary import nees_series, sun_gaps
+from ..config.sections import Solar
 from ..run.ekf import run_ekf
 from ..run.simulate import simulate
+from ..run.statistics import nees_series
 from ..run.whole import run_scenario
+from ..samples import sun_gaps
 from .propagation import (
     DEG,
     SWEEP_DEG,
@@ -196,8 +199,9 @@ def budget_plan(s: Scenario) -> tuple[list[Change], list[dict]]:
     scenario as configured has the effect."""
     J = np.asarray(s.spacecraft.inertia_kgm2, float)
     Ix, Iy, Iz = np.diag(J)
-    I_ = float(np.sqrt(Ix * Iz))
-    sol, default_trim = s.environment.solar, 19.6
+    I_ = eq5_inertia(Ix, Iz)
+    # The ideal flies the scenario schema's default tab (GOES-Next's, 1e-6 N m residual).
+    sol, default_trim = s.environment.solar, Solar.model_fields["trim_tab_deg"].default
     ctrl = s.control
     # The pitch loop stays on: without it any pitch torque (products of inertia, the
     # solar torque off the orbit plane) runs pitch away by tens of degrees in a day.

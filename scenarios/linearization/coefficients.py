@@ -19,72 +19,33 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from dynprop.eom.linear import (
+    COEFFICIENT_INDEX,
+    H_COL,
+    PHI,
+    PHI_D,
+    PITCH_ROW,
+    PSI,
+    PSI_D,
+    ROLL_ROW,
+    THETA,
+    THETA_D,
+    YAW_ROW,
+    eq3_coefficients,
+    eq5_inertia,
+    eq5_only,
+    eq6_only,
+    eq7_coefficients,
+    jacobian_of,
+    model_matrices,
+)
+from dynprop.estimator.model import roll_yaw_blocks, torque_input_matrix
 from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.linearize import linearize_about_nominal
 from dynprop.sim.spacecraft import Spacecraft
 
-# Jacobian columns (sim.linearize): state ψ φ θ ψ̇ φ̇ θ̇ h, inputs N_x N_y N_z Ḣ ḣ; rows ψ̈ φ̈ θ̈.
-PSI, PHI, THETA, PSI_D, PHI_D, THETA_D, H_COL = range(7)
-NX, NY, NZ, HDOT_BIG, HDOT = range(5)
-YAW_ROW, ROLL_ROW, PITCH_ROW = range(3)
 PRODUCTS_KGM2 = 30.0
-
-
-def _eq3(Ix, Iy, Iz, H, w0) -> dict[str, float]:
-    """Eqs. 3a–3c solved for the accelerations, by coefficient name."""
-    g = H + (Ix - Iy + Iz) * w0
-    return {
-        "roll/roll": w0 * (H - 4 * (Iy - Iz) * w0) / Ix,
-        "roll/yaw_rate": g / Ix,
-        "roll/h": w0 / Ix,
-        "roll/N_x": 1 / Ix,
-        "yaw/yaw": w0 * (H - (Iy - Ix) * w0) / Iz,
-        "yaw/roll_rate": -g / Iz,
-        "yaw/N_z": 1 / Iz,
-        "yaw/N_w": -1 / Iz,
-        "pitch/pitch": -3 * w0**2 * (Ix - Iz) / Iy,
-        "pitch/N_y": 1 / Iy,
-        "pitch/H_dot": -1 / Iy,
-    }
-
-
-# Where each named coefficient sits in the Jacobian: (row, "x" or "u", column).
-COEFFICIENT_INDEX = {
-    "roll/roll": (ROLL_ROW, "x", PHI), "roll/yaw_rate": (ROLL_ROW, "x", PSI_D),
-    "roll/h": (ROLL_ROW, "x", H_COL), "roll/N_x": (ROLL_ROW, "u", NX),
-    "yaw/yaw": (YAW_ROW, "x", PSI), "yaw/roll_rate": (YAW_ROW, "x", PHI_D),
-    "yaw/N_z": (YAW_ROW, "u", NZ), "yaw/N_w": (YAW_ROW, "u", HDOT),
-    "pitch/pitch": (PITCH_ROW, "x", THETA), "pitch/N_y": (PITCH_ROW, "u", NY),
-    "pitch/H_dot": (PITCH_ROW, "u", HDOT_BIG),
-}
 EQUATION = {"roll": "3a / 7a", "yaw": "3c / 7b", "pitch": "3b"}
-
-
-def eq7_coefficients(Ix, Iy, Iz, H, w0) -> dict[str, float]:
-    """Eqs. 7a–7b (= Eq. 11c in model units): I_x = I_z = I, ω0(I_y − I) dropped.
-    Pitch is not part of the paper's model; its Eq. 3b entries are carried over."""
-    I_ = np.sqrt(Ix * Iz)
-    wn = H / I_
-    out = _eq3(Ix, Iy, Iz, H, w0)
-    out.update({"roll/roll": w0 * wn, "roll/yaw_rate": wn + w0, "roll/h": w0 / I_,
-                "roll/N_x": 1 / I_, "yaw/yaw": w0 * wn, "yaw/roll_rate": -(wn + w0),
-                "yaw/N_z": 1 / I_, "yaw/N_w": -1 / I_})
-    return out
-
-
-def eq5_only(Ix, Iy, Iz, H, w0) -> dict[str, float]:
-    """Eqs. 3a–3c with only Eq. 5 applied (I_x = I_z = I, the ω0(I_y − I) terms kept)."""
-    I_ = np.sqrt(Ix * Iz)
-    return _eq3(I_, Iy, I_, H, w0)
-
-
-def eq6_only(Ix, Iy, Iz, H, w0) -> dict[str, float]:
-    """Eqs. 3a–3c with only Eq. 6 applied: the ω0·(inertia difference) terms in the
-    H coefficients dropped, I_x and I_z kept apart."""
-    out = _eq3(Ix, Iy, Iz, H, w0)
-    out.update({"roll/roll": w0 * H / Ix, "roll/yaw_rate": (H + Iz * w0) / Ix,
-                "yaw/yaw": w0 * H / Iz, "yaw/roll_rate": -(H + Ix * w0) / Iz})
-    return out
 
 
 def jacobian_coefficients(sc: Spacecraft, orbit: GeoOrbit) -> tuple[dict[str, float], dict]:
@@ -112,31 +73,14 @@ def omitted_terms(wrt_state: np.ndarray, wrt_input: np.ndarray) -> dict[str, flo
             "other_input_terms": float(np.abs(np.where(mask_u, wrt_input, 0.0)).max())}
 
 
-def model_matrices(wrt_state: np.ndarray, wrt_input: np.ndarray, omega_n: float
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """The Jacobian in the paper's model units: F (5×5) on [r, ṙ/ω_n, y, ẏ/ω_n, h]
-    and G (5×3) on the inputs [N_x, N_z, N_w].  Pitch is left out (Eq. 3b decouples)."""
-    F, G = np.zeros((5, 5)), np.zeros((5, 3))
-    F[0, 1] = F[2, 3] = omega_n
-    for row, jrow in ((1, ROLL_ROW), (3, YAW_ROW)):
-        F[row] = [wrt_state[jrow, PHI] / omega_n, wrt_state[jrow, PHI_D],
-                  wrt_state[jrow, PSI] / omega_n, wrt_state[jrow, PSI_D],
-                  wrt_state[jrow, H_COL] / omega_n]
-        G[row] = [wrt_input[jrow, NX] / omega_n, wrt_input[jrow, NZ] / omega_n,
-                  wrt_input[jrow, HDOT] / omega_n]
-    G[4, 2] = 1.0
-    return F, G
-
-
 def eq11_matrices(omega0: float, omega_n: float, H: float) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 11's roll/yaw/h block (A of Eq. 11c plus the h column of B) and its input
     matrix for [N_x, N_z, N_w] (Eq. 12a), in the same layout as ``model_matrices``."""
+    A, B = roll_yaw_blocks(omega0, omega_n, H)
     F = np.zeros((5, 5))
-    F[:4, :4] = [[0.0, omega_n, 0.0, 0.0], [omega0, 0.0, 0.0, omega_n + omega0],
-                 [0.0, 0.0, 0.0, omega_n], [0.0, -(omega_n + omega0), omega0, 0.0]]
-    F[1, 4] = omega0 / H
-    G = np.array([[0, 0, 0], [1 / H, 0, 0], [0, 0, 0], [0, 1 / H, -1 / H], [0, 0, 1.0]])
-    return F, G
+    F[:4, :4] = A
+    F[1, 4] = B[1, 0]    # h drives roll only (Eq. 11d: ω0/H)
+    return F, torque_input_matrix(H)[:5]
 
 
 def roll_yaw_frequencies(F: np.ndarray) -> tuple[float, float]:
@@ -168,7 +112,7 @@ def coefficient_section(sc: Spacecraft, orbit: GeoOrbit, H_range_Nms: float | No
     w0 = orbit.rate_radps
     jac, raw = jacobian_coefficients(sc, orbit)
     H = raw["H_Nms"]
-    eq3, eq7 = _eq3(Ix, Iy, Iz, H, w0), eq7_coefficients(Ix, Iy, Iz, H, w0)
+    eq3, eq7 = eq3_coefficients(Ix, Iy, Iz, H, w0), eq7_coefficients(Ix, Iy, Iz, H, w0)
     only5, only6 = eq5_only(Ix, Iy, Iz, H, w0), eq6_only(Ix, Iy, Iz, H, w0)
     prod, prod_raw = {}, {}
     for sign in (+1, -1):  # one Jacobian per sign, used by the table and the frequencies
@@ -185,7 +129,7 @@ def coefficient_section(sc: Spacecraft, orbit: GeoOrbit, H_range_Nms: float | No
             "rel_eq6_only": _rel(only6[name], jac[name]),
             "rel_products": max(_rel(prod[s][name], jac[name]) for s in prod),
         })
-    I_ = float(np.sqrt(Ix * Iz))
+    I_ = eq5_inertia(Ix, Iz)
     wn = H / I_
     F_jac, G_jac = model_matrices(raw["wrt_state"], raw["wrt_input"], wn)
     F_11, _ = eq11_matrices(w0, wn, H)
@@ -203,7 +147,7 @@ def coefficient_section(sc: Spacecraft, orbit: GeoOrbit, H_range_Nms: float | No
         for sign, label in ((+1, "H_plus"), (-1, "H_minus")):
             Hs = H + sign * H_range_Nms
             freqs[label] = roll_yaw_frequencies(
-                _matrix_from_named(_eq3(Ix, Iy, Iz, Hs, w0), wn))
+                _matrix_from_named(eq3_coefficients(Ix, Iy, Iz, Hs, w0), wn))
     ref = freqs["jacobian"]
     eig = {k: {"omega_slow_radps": v[0], "omega_fast_radps": v[1],
                "rel_slow": _rel(v[0], ref[0]), "rel_fast": _rel(v[1], ref[1])}
@@ -227,11 +171,7 @@ def coefficient_section(sc: Spacecraft, orbit: GeoOrbit, H_range_Nms: float | No
 
 def _matrix_from_named(c: dict[str, float], omega_n: float) -> np.ndarray:
     """The 5×5 model-unit matrix of a set of named coefficients (diagonal J)."""
-    wrt_state = np.zeros((3, 7))
-    wrt_input = np.zeros((3, 5))
-    for name, (r, m, col) in COEFFICIENT_INDEX.items():
-        (wrt_state if m == "x" else wrt_input)[r, col] = c[name]
-    return model_matrices(wrt_state, wrt_input, omega_n)[0]
+    return model_matrices(*jacobian_of(c), omega_n)[0]
 
 
 def _max_rel(a: np.ndarray, b: np.ndarray) -> float:

@@ -24,18 +24,20 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from dynprop.eom.linear import model_matrices
 from dynprop.estimator import model as em
+from dynprop.estimator.propagate import propagate_lti, zoh
 from dynprop.estimator.transition import discretize
+from dynprop.sim.frames import euler312_rates
 from dynprop.sim.linearize import linearize_about_nominal
-from scipy.linalg import expm
 
+from ..bridge.coordinates import external_torque, model_attitude, step_rates
 from ..config import build
 from ..config.loader import validate
 from ..config.schema import Scenario
-from ..run.whole import EXTERNAL, euler_rates, project_torques, propagate_linear, propagate_lti
-from .coefficients import eq11_matrices, model_matrices
+from ..units import DEG
+from .coefficients import eq11_matrices
 
-DEG = np.pi / 180.0
 SWEEP_DEG = (0.01, 0.1, 1.0, 3.0, 10.0)
 ENVELOPE = 64  # samples per bin of the |divergence| envelopes kept for the figures
 
@@ -96,15 +98,6 @@ class LinearModel:
     Gamma: np.ndarray
 
 
-def discretize_lti(F: np.ndarray, G: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact zero-order-hold Φ and Γ from one matrix exponential (Van Loan)."""
-    n, m = G.shape
-    aug = np.zeros((n + m, n + m))
-    aug[:n, :n], aug[:n, n:] = F, G
-    e = expm(aug * dt)
-    return e[:n, :n], e[:n, n:]
-
-
 def linear_models(s: Scenario, names=("eq11", "jacobian")) -> dict[str, LinearModel]:
     """The paper's Eq. 11 model and the exact Jacobian, for this scenario's spacecraft."""
     params, _ = build.estimator_model(s)
@@ -113,22 +106,19 @@ def linear_models(s: Scenario, names=("eq11", "jacobian")) -> dict[str, LinearMo
     if "jacobian" in names:
         lin = linearize_about_nominal(build.build_spacecraft(s), build.orbit(s))
         mats["jacobian"] = model_matrices(lin.wrt_state, lin.wrt_input, wn)
-    return {k: LinearModel(k, F, G, *discretize_lti(F, G, dt)) for k, (F, G) in mats.items()}
+    return {k: LinearModel(k, F, G, *zoh(F, G, dt)) for k, (F, G) in mats.items()}
 
 
 def model_state(truth, omega_n: float) -> np.ndarray:
     """The truth as [r, ṙ/ω_n, y, ẏ/ω_n, h] (N, 5), Euler rates from ω_BR."""
-    rates = euler_rates(truth.euler_rad, truth.w_br_radps)
-    return np.column_stack([truth.roll_rad, rates[:, 1] / omega_n, truth.yaw_rad,
-                            rates[:, 0] / omega_n, truth.h_Nms])
+    return model_attitude(truth, euler312_rates(truth.euler_rad, truth.w_br_radps), omega_n)
 
 
 def model_inputs(truth, dt: float) -> np.ndarray:
     """[N_x, N_z, N_w] (N, 3): true external body torques and N_w averaged over each
     step (exact for h under a zero-order hold)."""
-    ext = sum(truth.torques[k] for k in EXTERNAL)
-    nw = np.append(np.diff(truth.h_Nms) / dt, 0.0)
-    return np.column_stack([ext[:, 0], ext[:, 2], nw])
+    ext = external_torque(truth)
+    return np.column_stack([ext[:, 0], ext[:, 2], step_rates(truth.h_Nms, dt)])
 
 
 def divergence(x_truth: np.ndarray, u: np.ndarray, m: LinearModel, start: int = 0,
@@ -159,12 +149,12 @@ def gap_yaw_errors(s: Scenario, truth, gap: tuple[int, int]) -> dict[str, float]
     eq11 = linear_models(s, ("eq11",))["eq11"]
     dyn = divergence(x5, u, eq11, a, b)[-1]
     mt = s.estimator.model_torques
-    states, _, _ = project_torques(truth.t_s, u[:, 0] - mt.roll_Nm, u[:, 1] - mt.yaw_Nm,
+    states, _, _ = em.project_torques(truth.t_s, u[:, 0] - mt.roll_Nm, u[:, 1] - mt.yaw_Nm,
                                    params.omega0_radps)
     disc = discretize(params, noise, dt)
     x0 = np.concatenate([x5[a], states[a]])
     uu = em.input_vector(params, mt.roll_Nm, mt.yaw_Nm, u[a:b + 1, 2])
-    tq = propagate_linear(disc, x0, uu)[-1, :5] - x5[b]
+    tq = propagate_lti(disc.Phi, disc.Gamma, x0, uu)[-1, :5] - x5[b]
     return {"dynamics_deg": float(dyn[2] / DEG), "torque_model_deg": float(tq[2] / DEG),
             "dynamics_roll_deg": float(dyn[0] / DEG),
             "torque_model_roll_deg": float(tq[0] / DEG)}

@@ -19,14 +19,14 @@ from dynprop.estimator.kalman import unpack
 from dynprop.estimator.model import H_WHEEL, R, Y
 
 from ..config.schema import Scenario
-from ..files.columns import telemetry_columns
-from ..files.summary import display_factors, sun_gaps
+from ..files.columns import display_factors, telemetry_columns
+from ..run.ekf import other_filters
 from ..run.simulate import simulate
 from ..run.whole import run_scenario
+from ..samples import sun_gaps
+from ..units import HOUR_S, RAD2DEG
 from ..workers import blas_one_thread
 from .dispersions import UnphysicalDraw, draw_case
-
-RAD2DEG = 180.0 / np.pi
 
 
 def grid_stride(s: Scenario) -> int:
@@ -60,7 +60,7 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
     if not full and not np.array_equal(runs.rows, rows):
         raise ValueError("the filter history was kept at other rows than case_rows")
     on_grid = np.searchsorted(rows, grid)
-    converged = grid * dt >= s.montecarlo.converged_after_h * 3600
+    converged = grid * dt >= s.montecarlo.converged_after_h * HOUR_S
     ends = [b for _, b in gaps if b < n]
     at_end = np.searchsorted(rows, ends)
     f = display_factors(runs.params.omega_n_radps)
@@ -113,18 +113,6 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
         arrays[f"sigma_{name}"] = (sigma_e[on_grid] * np.abs(f)).astype(np.float32)
         arrays[f"nees_{name}"] = nees_e.astype(np.float32)
     return record, arrays
-
-
-def other_filters(s: Scenario, cols: dict, rows=None) -> dict:
-    """The filters besides the paper's (``estimator.filters``) on a case's telemetry
-    columns, their histories at ``rows`` (all samples if None)."""
-    if "ekf" not in s.estimator.filters:
-        return {}
-    from ..run.ekf import run_ekf
-    from ..run.whole import DEG, telemetry_inputs
-    roll, yaw, speeds, sigma, head = telemetry_inputs(s, cols)
-    return {"ekf": run_ekf(s, roll, cols["pitch_deg"] * DEG, yaw, speeds, sigma, head,
-                           rows=rows)}
 
 
 def full_arrays(runs) -> dict[str, np.ndarray]:

@@ -16,8 +16,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 
-from ..config.loader import resolved_yaml
-from ..config.schema import Scenario
+from ..config.schema import Scenario, resolved_yaml
 from ..workers import worker_pool
 from . import SchedulerError
 from .case import failed, run_case

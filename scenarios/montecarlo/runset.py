@@ -88,20 +88,13 @@ def caption(s: Scenario, summary: dict, command: str) -> str:
 
 def ensemble_figures(s: Scenario, summary: dict, fig: dict, command: str) -> dict:
     """The set's figures as matplotlib Figures, by file name (``FIGURES``)."""
-    from dynprop.plots.montecarlo import plot_ensemble_errors, plot_ensemble_nees, plot_gap_end_yaw
-    text = caption(s, summary, command)
-    conv = s.montecarlo.converged_after_h
-    figures = (
-        plot_ensemble_errors(fig, summary["analytic_sigma_yaw_deg"], summary["runs_ok"],
-                             conv, text),
-        plot_ensemble_nees(fig, summary, conv, text),
-        plot_gap_end_yaw(fig, summary, text),
-    )
-    return dict(zip(FIGURES, figures, strict=True))
+    from ..figures.montecarlo import ensemble_figures as draw
+    return dict(zip(FIGURES, draw(summary, fig, s.montecarlo.converged_after_h,
+                                  caption(s, summary, command)), strict=True))
 
 
 def draw_figures(plots: Path, s: Scenario, summary: dict, fig: dict, command: str) -> None:
-    from ..figures.run import save_figure
+    from ..figures import save_figure
     plots.mkdir(exist_ok=True)
     for name, f in ensemble_figures(s, summary, fig, command).items():
         save_figure(f, plots / name)

@@ -25,9 +25,9 @@ from scipy import stats as sps
 from .. import __version__
 from ..config.build import estimator_model
 from ..config.schema import Scenario
-from ..files.summary import STATE_COLUMNS, eq55_sigma_yaw_deg
+from ..files.columns import STATE_COLUMNS
+from ..files.summary import eq55_sigma_yaw_deg
 
-RAD2DEG = 180.0 / np.pi
 # |e| quantiles that a Gaussian puts at 1σ, 2σ and 3σ (the keys of montecarlo.json
 # name the Gaussian level; the values are sample quantiles, not σ).
 SIGMA_LEVELS = {"1sigma": 0.682689492, "2sigma": 0.954499736, "3sigma": 0.997300204}

@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..config.loader import resolved_yaml
-from ..config.schema import Scenario
+from ..config.schema import Scenario, resolved_yaml
 from ..files.rundir import RunDirError, check_out_dir
 
 SCENARIO_FILE = "scenario.yaml"

@@ -1,5 +1,5 @@
-"""The figures of a filter besides the paper's (``estimator.filters``), accumulated
-as a streamed run's windows pass, like ``accumulate.RunFigures`` for the paper's:
+"""The statistics of a filter besides the paper's (``estimator.filters``), tallied
+as a streamed run's windows pass, like ``tally.RunTally`` for the paper's:
 summary.json's ``ekf`` section.  The Sun gaps are the paper filter's (the same
 telemetry); the errors are against the same truth in the paper's coordinates."""
 
@@ -10,14 +10,15 @@ from dynprop.estimator.consistency import chi2_bounds, nees, nis
 from dynprop.estimator.kalman import unpack
 from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 
-from ..files.decimate import output_rows
-from ..files.summary import NEES_STRIDE, RAD2DEG
+from ..records import FilterHistory
+from ..samples import nees_rows
+from ..units import RAD2DEG
 from .tally import Mean, Rms
 
 EKF_MEASUREMENTS = ("roll", "pitch", "yaw", "h")
 
 
-class FilterFigures:
+class FilterTally:
     def __init__(self, name: str, measurements=EKF_MEASUREMENTS):
         self.name, self.measurements = name, measurements
         self.rms = {k: Rms() for k in ("yaw", "roll", "h")}
@@ -29,19 +30,18 @@ class FilterFigures:
         self.backend = None
         self.bounds = chi2_bounds(N_STATES, 1)
 
-    def errors(self, rec: dict) -> np.ndarray:
-        return rec[self.name].x - rec["truth_model"]
-
-    def add(self, rec: dict, closed_gaps, truth: bool = True) -> None:
-        f = rec[self.name]
+    def add(self, f: FilterHistory, start: int, truth_model: np.ndarray | None, closed_gaps
+            ) -> None:
+        """One window's history of this filter from sample ``start`` on, against the
+        truth in the model's states (None without a truth)."""
         self.backend = f.backend
-        a = rec["start"]
+        a = start
         v = nis(f.innovations, f.innovation_var)
         for i in range(len(self.measurements)):
             self.nis[i].add(v[:, i])
-        if not truth:
+        if truth_model is None:
             return
-        err = self.errors(rec)
+        err = f.x - truth_model
         for _, b in closed_gaps:
             k = b - a
             self.end_err.append(float(err[k, Y] * RAD2DEG))
@@ -50,8 +50,8 @@ class FilterFigures:
         self.rms["yaw"].add(err[:, Y])
         self.rms["roll"].add(err[:, R])
         self.rms["h"].add(err[:, H_WHEEL])
-        k = output_rows(a, a + len(rec["t_s"]), NEES_STRIDE) - a
-        values = nees(f.x[k], unpack(f.P_nees), rec["truth_model"][k])
+        k = nees_rows(a, a + len(f.x)) - a
+        values = nees(f.x[k], unpack(f.P_nees), truth_model[k])
         self.nees.add(values)
         finite = values[np.isfinite(values)]
         self.inside[0] += int(np.sum((finite >= self.bounds[0]) & (finite <= self.bounds[1])))

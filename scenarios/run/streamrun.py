@@ -1,13 +1,13 @@
 """`dynprop run` as a stream: the run directory written window by window.
 
 The producer (truth, telemetry, the linear twin and its filter; it also writes
-truth.csv and telemetry.csv) runs in a second process, joined to this one by a
-queue of at most ``QUEUE_ITEMS`` records (their arrays go by shared-memory file,
-``handoff``), while this one runs the real filter and the smoother, accumulates
-the summary (``accumulate``) and writes estimate.csv and comparison.npz
-(``decimate``) at the output cadence.  Memory holds a few windows, whatever the
-duration.  Progress: a bar of simulated days on a terminal, otherwise a line every
-``LOG_EVERY_DAYS`` days, for runs longer than one window.
+truth.csv and telemetry.csv) runs in a second process (``process``), while this
+one runs the real filter and the smoother (``stream.windows_of``), tallies the
+summary and daily.csv (``tally``, ``daily``, ``filter_tally``) and writes
+estimate.csv and comparison.npz (``files.decimate``) at the output cadence.
+Memory holds a few windows, whatever the duration.  Progress: a bar of simulated
+days on a terminal, otherwise a line every ``LOG_EVERY_DAYS`` days, for runs
+longer than one window.
 """
 
 from __future__ import annotations
@@ -16,69 +16,25 @@ import contextlib
 import sys
 import time
 from itertools import islice
-from multiprocessing import get_context
 from pathlib import Path
 
 from ..config import build
-from ..config.loader import resolved_yaml
-from ..config.schema import Scenario, output_writes_telemetry
+from ..config.schema import Scenario, output_writes_telemetry, resolved_yaml
+from ..files.columns import estimate_columns
 from ..files.csvio import CsvAppender, write_csv
-from ..files.decimate import ComparisonRows, output_rows
-from ..files.summary import assemble_summary, eq55_sigma_yaw_deg, estimate_columns, write_summary
-from ..trim.loop import loop_summary
-from ..workers import blas_one_thread, ignore_sigint, sigint_held
-from . import handoff
-from .filter_tally import FilterFigures
-from .stream import DAY_S, producer, windows_of
-from .tally import DailyFigures, RunFigures, window_nees
+from ..files.decimate import ComparisonRows
+from ..files.summary import assemble_summary, eq55_sigma_yaw_deg, write_summary
+from ..samples import nees_rows, output_rows
+from ..units import DAY_S
+from ..workers import blas_one_thread
+from .daily import DailyTally
+from .filter_tally import FilterTally
+from .process import producer_process
+from .producer import producer
+from .stream import windows_of
+from .tally import RunTally
 
-QUEUE_ITEMS = 4   # two windows: a real and a twin record each
 LOG_EVERY_DAYS = 10
-
-
-def _child(queue, s, run, window_samples, out, telemetry_file, shared) -> None:
-    ignore_sigint()   # the parent handles Ctrl-C and terminates this process
-    try:
-        for item in producer(s, run, window_samples, out, telemetry_file):
-            queue.put(("item", handoff.pack(item, shared)))
-        queue.put(("done", None))
-    except BaseException as exc:  # noqa: BLE001 - handed to the parent, which raises it
-        try:
-            queue.put(("error", exc))
-        except Exception:  # noqa: BLE001 - an exception that does not pickle
-            queue.put(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
-
-
-def producer_process(s: Scenario, run: int, window_samples, out, telemetry_file):
-    """``stream.producer`` in a forked process; yields what it yields."""
-    ctx = get_context("fork")
-    queue = ctx.Queue(maxsize=QUEUE_ITEMS)
-    shared = handoff.HandoffDir()
-    proc = ctx.Process(target=_child, args=(queue, s, run, window_samples, out,
-                                            telemetry_file, shared.path), daemon=True)
-    with sigint_held():
-        proc.start()
-    try:
-        while True:
-            try:
-                kind, item = queue.get(timeout=1.0)
-            except Exception:  # noqa: BLE001 - queue.Empty: is the producer still there?
-                if not proc.is_alive():
-                    raise RuntimeError(f"the truth process died (exit {proc.exitcode})") \
-                        from None
-                continue
-            if kind == "done":
-                break
-            if kind == "error":
-                raise item
-            yield handoff.unpack(*item)
-        proc.join()
-    finally:
-        if proc.is_alive():
-            proc.terminate()
-            proc.join()
-        queue.close()
-        shared.close()
 
 
 class Progress:
@@ -117,16 +73,18 @@ class Progress:
 @blas_one_thread()   # the producer, forked inside, inherits the limit
 def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
                         window_samples: int | None = None, processes: int = 2,
-                        progress: bool = True) -> dict:
+                        progress: bool = True, steering=None) -> dict:
     """Everything of one `dynprop run` into ``stage`` (docs/outputs.md); returns the
-    summary.  ``processes=1`` keeps the producer in this process."""
+    summary.  ``processes=1`` keeps the producer in this process.  ``steering``
+    steers the truth from the run's own telemetry (``producer``'s module doc): the
+    trim loop, whose summary.json section its ``summary(stage)`` gives."""
     stage = Path(stage)
     (stage / "scenario.yaml").write_text(resolved_yaml(s))
     tel_file = output_writes_telemetry(s)
     if processes > 1:
-        source = producer_process(s, run, window_samples, stage, tel_file)
+        source = producer_process(s, run, window_samples, stage, tel_file, steering)
     else:
-        source = producer(s, run, window_samples, stage, tel_file)
+        source = producer(s, run, window_samples, stage, tel_file, steering)
     records = windows_of(s, items=source)
     plan = next(records)
     # The figures' modules (matplotlib: ~0.4 s) load while the producer simulates the
@@ -135,37 +93,37 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     params, _ = build.estimator_model(s)
     dt = s.sample_interval_s
     n = plan.n_samples
-    figures = RunFigures(s)
-    daily = DailyFigures(s, build.epoch(s), n, eq55_sigma_yaw_deg(s, params))
+    tally = RunTally(s)
+    daily = DailyTally(s, build.epoch(s), n, eq55_sigma_yaw_deg(s, params))
     comparison = ComparisonRows(stage / ".comparison", n, plan.stride)
     estimate = CsvAppender(stage / "estimate.csv")
-    # Filters beside the paper's (estimator.filters): their figures and estimate file.
-    extra = {name: (FilterFigures(name), CsvAppender(stage / f"estimate_{name}.csv"))
+    # Filters beside the paper's (estimator.filters): their tallies and estimate file.
+    extra = {name: (FilterTally(name), CsvAppender(stage / f"estimate_{name}.csv"))
              for name in s.estimator.filters if name != "paper"}
     bar = Progress(n * dt / DAY_S, progress and len(plan.bounds) > 1)
     # The figures need only comparison.npz and daily.csv, so they are drawn while the
-    # producer writes the last of its files; a trim loop's figure also reads
-    # trim_loop.csv, which the producer writes, so that run draws after it.
-    overlap = s.trim.every_days is None
+    # producer writes the last of its files; a steered run's figure also reads the
+    # file the producer writes (trim_loop.csv), so that run draws after it.
+    overlap = steering is None
     try:
         # The windows' records, and not one more: asking for the next would wait for
         # the producer to finish its files (stream.windows_of drains it there).
-        for rec in islice(records, len(plan.bounds)):
-            err = rec["real"].x - rec["truth_model"]
-            err_lin = rec["linear"].x - rec["twin_model"]
-            nees_idx, nees_real, nees_lin = window_nees(rec)
-            closed = figures.add(rec, err, err_lin, nees_idx, nees_real, nees_lin)
-            daily.add(rec, err, err_lin, nees_idx, nees_real, closed)
-            comparison.add(rec, nees_idx, nees_real, nees_lin, tuple(extra), err, err_lin)
-            k = output_rows(rec["start"], rec["stop"], plan.stride) - rec["start"]
-            estimate.append(estimate_columns(rec["t_s"][k], rec["real"].x[k],
-                                             rec["real"].sigma[k], params.omega_n_radps))
+        for w in islice(records, len(plan.bounds)):
+            err = w.real.x - w.truth_model
+            err_lin = w.linear.x - w.twin_model
+            nees_idx = nees_rows(w.start, w.stop)
+            closed = tally.add(w, err, err_lin, nees_idx)
+            daily.add(w, err, err_lin, nees_idx, closed)
+            comparison.add(w, nees_idx, err, err_lin)
+            k = output_rows(w.start, w.stop, plan.stride) - w.start
+            estimate.append(estimate_columns(w.t_s[k], w.real.x[k], w.real.sigma[k],
+                                             params.omega_n_radps))
             for name, (figs, file) in extra.items():
-                figs.add(rec, closed)
-                file.append(estimate_columns(rec["t_s"][k], rec[name].x[k],
-                                             rec[name].sigma[k], params.omega_n_radps))
-            bar.update(rec["stop"] * dt / DAY_S)
-            del rec, err, err_lin
+                figs.add(w.filters[name], w.start, w.truth_model, closed)
+                file.append(estimate_columns(w.t_s[k], w.filters[name].x[k],
+                                             w.filters[name].sigma[k], params.omega_n_radps))
+            bar.update(w.stop * dt / DAY_S)
+            del w, err, err_lin
         bar.close()
         comparison.finish(stage / "comparison.npz", plan.stride * dt)
         write_csv(stage / "daily.csv", daily.columns())
@@ -181,16 +139,15 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         for _, file in extra.values():
             file.close()
         bar.close()
-    summary = assemble_summary(s, params, figures.backend, True, True, figures.figures(n))
+    summary = assemble_summary(s, params, tally.backend, True, True, tally.statistics(n))
     summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
                    daily="daily.csv")
     summary["filters"] = list(s.estimator.filters)   # the paper's alone elsewhere
     for name, (figs, _) in extra.items():
         summary[name] = figs.summary()
-    if s.trim.every_days is not None:
-        summary["trim_loop"] = loop_summary(s, stage / "trim_loop.csv")
+    if steering is not None:
+        summary.update(steering.summary(stage))
     if not overlap:
         plot_run_figures(stage)
     write_summary(stage / "summary.json", summary)
     return summary
-

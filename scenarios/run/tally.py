@@ -1,26 +1,25 @@
-"""Figures of a streamed run, accumulated at the full sample rate window by window.
+"""The statistics of a streamed run, tallied at the full sample rate window by
+window.
 
-``RunFigures`` gathers what summary.json reports (``outputs.assemble_summary``):
+``RunTally`` gathers what summary.json reports (``files.summary.RunStatistics``):
 sums of squares, NEES and NIS sums and counts, the Sun gaps and the errors at
 their ends.  For a run of one window every figure is computed by the very numpy
-operation ``outputs.summarize`` applies to the whole arrays, so the two agree bit
-for bit; over several windows the sums are added window by window (the last bits
-of a long sum depend on its order).  ``DailyFigures`` does the same per simulated
-day for daily.csv.
+operation ``statistics.whole_run_statistics`` applies to the whole arrays, so the
+two agree bit for bit; over several windows the sums are added window by window
+(the last bits of a long sum depend on its order).  ``daily.DailyTally`` does the
+same per simulated day for daily.csv, ``filter_tally.FilterTally`` for a filter
+beside the paper's.
 """
 
 from __future__ import annotations
-
-from datetime import timedelta
 
 import numpy as np
 from dynprop.estimator.consistency import chi2_bounds, nis
 from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 
-from ..files.decimate import output_rows
-from ..files.summary import NEES_STRIDE, RAD2DEG
-
-DAY_S = 86400.0
+from ..files.summary import RunStatistics
+from ..records import Window
+from ..units import HOUR_S, RAD2DEG
 
 
 def _sq_sum(a) -> tuple[float, int]:
@@ -43,7 +42,7 @@ class Rms:
 
 
 class Mean:
-    """Mean of the finite values (``outputs._mean_or_none``)."""
+    """Mean of the finite values (``statistics.mean_or_none``)."""
 
     def __init__(self):
         self.total, self.count = 0.0, 0
@@ -58,7 +57,7 @@ class Mean:
 
 
 class GapTracker:
-    """Sun gaps (``outputs.sun_gaps``) found as the windows pass: a yaw outage of at
+    """Sun gaps (``samples.sun_gaps``) found as the windows pass: a yaw outage of at
     least ``min_s``; its end is the first sample with yaw again."""
 
     def __init__(self, dt_s: float, min_s: float):
@@ -67,7 +66,7 @@ class GapTracker:
         self.gaps: list[tuple[int, int]] = []
 
     def _long(self, a: int, b: int) -> bool:
-        return (b - a) * self.dt_s >= self.min_s   # the predicate of outputs.sun_gaps
+        return (b - a) * self.dt_s >= self.min_s   # the predicate of samples.sun_gaps
 
     def add(self, start: int, present: np.ndarray) -> list[tuple[int, int]]:
         """The gaps (global first missing, first present again) closing in this window."""
@@ -97,13 +96,13 @@ class GapTracker:
         self.open_since = None
 
 
-class RunFigures:
-    """summary.json's figures over a streamed run (see the module doc)."""
+class RunTally:
+    """summary.json's statistics over a streamed run (see the module doc)."""
 
     def __init__(self, s, truth: bool = True, twin: bool = True):
         self.s, self.truth, self.twin = s, truth, twin
         dt = s.sample_interval_s
-        self.gaps = GapTracker(dt, s.estimator.sun_gap_min_h * 3600)
+        self.gaps = GapTracker(dt, s.estimator.sun_gap_min_h * HOUR_S)
         self.rms = {k: Rms() for k in ("yaw", "roll", "h", "yaw_linear", "yaw_smoothed")}
         self.cmp = {k: (Rms(), Rms(), Rms()) for k in ("roll_deg", "yaw_deg", "h_Nms")}
         self.max_diff = {k: 0.0 for k in self.cmp}
@@ -116,14 +115,14 @@ class RunFigures:
         self.backend = None
         self.bounds = chi2_bounds(N_STATES, 1)
 
-    def add(self, rec: dict, err, err_lin, nees_idx, nees_real, nees_lin
-            ) -> list[tuple[int, int]]:
+    def add(self, w: Window, err, err_lin, nees_idx) -> list[tuple[int, int]]:
         """Adds one window; returns the Sun gaps that closed in it."""
-        a = rec["start"]
-        real = rec["real"]
+        a = w.start
+        real = w.real
         self.backend = real.backend
         sig = real.sigma
-        present = np.isfinite(rec["meas"][1])
+        nees_real, nees_lin = w.nees_real, w.nees_linear
+        present = np.isfinite(w.measured.yaw_rad)
         closed = self.gaps.add(a, present)
         for _, b in closed:
             k = b - a
@@ -134,7 +133,7 @@ class RunFigures:
             if self.twin:
                 self.ends["err_linear"].append(float(err_lin[k, Y] * RAD2DEG))
         for name in ("real", "linear"):
-            result = real if name == "real" else rec.get("linear")
+            result = real if name == "real" else w.linear
             if result is not None:
                 v = nis(result.innovations, result.innovation_var)
                 for m in range(3):
@@ -148,8 +147,8 @@ class RunFigures:
             self.per_state = self.per_state + np.sum(ratio, axis=0)
             self.per_state_n += len(ratio)
             self._nees("real", nees_real)
-            if rec.get("smoothed") is not None:
-                self.rms["yaw_smoothed"].add(rec["smoothed"].x[:, Y] - rec["truth_model"][:, Y])
+            if w.smoothed_x is not None:
+                self.rms["yaw_smoothed"].add(w.smoothed_x[:, Y] - w.truth_model[:, Y])
         if self.twin:
             self.rms["yaw_linear"].add(err_lin[:, Y])
             self._nees("linear", nees_lin)
@@ -170,8 +169,8 @@ class RunFigures:
         self.nees_inside[name][0] += int(np.sum((v >= self.bounds[0]) & (v <= self.bounds[1])))
         self.nees_inside[name][1] += v.size
 
-    def figures(self, n_samples: int) -> dict:
-        """The dict ``outputs.assemble_summary`` takes."""
+    def statistics(self, n_samples: int) -> RunStatistics:
+        """The run's statistics, once every window is in."""
         self.gaps.finish(n_samples)
         truth, twin = self.truth, self.twin
 
@@ -189,114 +188,26 @@ class RunFigures:
                     for (name, (r, lin, d)), f in zip(self.cmp.items(),
                                                        (RAD2DEG, RAD2DEG, 1.0), strict=True)}
 
-        return {
-            "yaw_rms": when(truth, lambda: self.rms["yaw"].value() * RAD2DEG),
-            "per_state": when(truth, lambda: self.per_state / self.per_state_n),
-            "yaw_rms_linear": when(twin, lambda: self.rms["yaw_linear"].value() * RAD2DEG),
-            "roll_rms": when(truth, lambda: self.rms["roll"].value() * RAD2DEG),
-            "h_rms": when(truth, lambda: self.rms["h"].value()),
-            "yaw_rms_smoothed": when(truth and self.rms["yaw_smoothed"].count > 0,
-                                     lambda: self.rms["yaw_smoothed"].value() * RAD2DEG),
-            "gaps": self.gaps.gaps,
-            "end_err": when(truth, lambda: self.ends["err"]),
-            "end_err_linear": when(twin, lambda: self.ends["err_linear"]),
-            "end_sigma": self.ends["sigma"],
-            "ends_within": when(truth, lambda: self.within),
-            "comparison": when(truth and twin, comparison),
-            "nees_mean": when(truth, lambda: float(self.nees["real"].total
-                                                   / self.nees["real"].count)),
-            "nees_mean_linear": when(twin, lambda: float(self.nees["linear"].total
-                                                         / self.nees["linear"].count)),
-            "nees_inside": when(truth, lambda: inside("real")),
-            "nees_inside_linear": when(twin, lambda: inside("linear")),
-            "nis": {m: self.nis["real"][i].value() for i, m in enumerate(("roll", "yaw", "h"))},
-            "nis_linear": when(twin, lambda: {m: self.nis["linear"][i].value()
-                                              for i, m in enumerate(("roll", "yaw", "h"))}),
-        }
-
-
-DAILY_COLUMNS = ("day", "day_of_year", "sun_gap_start_h", "sun_gap_end_h", "sun_gap_length_h",
-                 "gap_end_yaw_error_deg", "gap_end_yaw_sigma_deg", "eq55_sigma_yaw_deg",
-                 "eclipse_min", "roll_error_rms_deg", "yaw_error_rms_deg", "h_error_rms_Nms",
-                 "nees_mean", "yaw_error_rms_linear_deg", "yaw_error_rms_real_minus_linear_deg")
-
-
-class DailyFigures:
-    """One row of daily.csv per simulated day (day k: t in [k, k+1) days)."""
-
-    def __init__(self, s, epoch, n_samples: int, eq55_deg: float):
-        dt = s.sample_interval_s
-        self.dt = dt
-        # The run's last sample, at exactly k days, closes day k−1 (a year has 365 rows).
-        self.n_days = max(1, int(np.ceil((n_samples - 1) * dt / DAY_S - 1e-9)))
-        self.epoch, self.eq55 = epoch, eq55_deg
-        d = self.n_days
-        self.sums = {k: np.zeros(d) for k in ("roll", "yaw", "h", "nees", "yaw_linear", "diff")}
-        self.counts = {k: np.zeros(d, dtype=np.int64) for k in self.sums}
-        self.eclipse = np.zeros(d, dtype=np.int64)
-        self.gap = np.full((d, 4), np.nan)  # start, end (samples), error, σ at its end
-
-    def _day(self, idx) -> np.ndarray:
-        return np.minimum((np.asarray(idx) * self.dt // DAY_S).astype(np.int64),
-                          self.n_days - 1)
-
-    def _add(self, key: str, day, values) -> None:
-        ok = np.isfinite(values)
-        self.sums[key] += np.bincount(day[ok], np.asarray(values)[ok], self.n_days)
-        self.counts[key] += np.bincount(day[ok], minlength=self.n_days)
-
-    def add(self, rec: dict, err, err_lin, nees_idx, nees_real, gaps_closed) -> None:
-        a = rec["start"]
-        n = len(rec["t_s"])
-        day = self._day(np.arange(a, a + n))
-        self.eclipse += np.bincount(day[rec["shadow"] < 1.0], minlength=self.n_days)
-        if err is not None:
-            self._add("roll", day, np.square(err[:, R] * RAD2DEG))
-            self._add("yaw", day, np.square(err[:, Y] * RAD2DEG))
-            self._add("h", day, np.square(err[:, H_WHEEL]))
-            self._add("nees", self._day(nees_idx), nees_real)
-        if err_lin is not None:
-            self._add("yaw_linear", day, np.square(err_lin[:, Y] * RAD2DEG))
-            if err is not None:
-                self._add("diff", day, np.square((err[:, Y] - err_lin[:, Y]) * RAD2DEG))
-        sig = rec["real"].sigma
-        for ga, gb in gaps_closed:
-            if gb >= a + n or gb < a:
-                continue
-            d = int(self._day(gb))
-            if np.isnan(self.gap[d, 0]) or gb - ga > self.gap[d, 1] - self.gap[d, 0]:
-                e = np.nan if err is None else err[gb - a, Y] * RAD2DEG
-                self.gap[d] = (ga, gb, e, sig[gb - a, Y] * RAD2DEG)
-
-    def columns(self) -> dict[str, np.ndarray]:
-        d = np.arange(self.n_days)
-
-        def mean(key, root=False):
-            with np.errstate(invalid="ignore", divide="ignore"):
-                v = self.sums[key] / self.counts[key]
-            v[self.counts[key] == 0] = np.nan
-            return np.sqrt(v) if root else v
-
-        doy = np.array([(self.epoch + timedelta(days=int(k))).timetuple().tm_yday for k in d],
-                       dtype=float)
-        to_h = self.dt / 3600.0
-        return {
-            "day": d.astype(float), "day_of_year": doy,
-            "sun_gap_start_h": self.gap[:, 0] * to_h, "sun_gap_end_h": self.gap[:, 1] * to_h,
-            "sun_gap_length_h": (self.gap[:, 1] - self.gap[:, 0]) * to_h,
-            "gap_end_yaw_error_deg": self.gap[:, 2], "gap_end_yaw_sigma_deg": self.gap[:, 3],
-            "eq55_sigma_yaw_deg": np.full(self.n_days, self.eq55),
-            "eclipse_min": self.eclipse * self.dt / 60.0,
-            "roll_error_rms_deg": mean("roll", True), "yaw_error_rms_deg": mean("yaw", True),
-            "h_error_rms_Nms": mean("h", True), "nees_mean": mean("nees"),
-            "yaw_error_rms_linear_deg": mean("yaw_linear", True),
-            "yaw_error_rms_real_minus_linear_deg": mean("diff", True),
-        }
-
-
-def window_nees(rec: dict):
-    """Global NEES indices of the window, the real filter's NEES there (formed once
-    the window was smoothed, ``stream._lighten_real``) and the twin's (where the twin
-    was filtered, ``twin_stream.lighten_twin``)."""
-    a, b = rec["start"], rec["start"] + len(rec["t_s"])
-    return output_rows(a, b, NEES_STRIDE), rec["nees_real"], rec.get("nees_linear")
+        return RunStatistics(
+            gaps=self.gaps.gaps, end_sigma=self.ends["sigma"],
+            nis={m: self.nis["real"][i].value() for i, m in enumerate(("roll", "yaw", "h"))},
+            yaw_rms=when(truth, lambda: self.rms["yaw"].value() * RAD2DEG),
+            per_state=when(truth, lambda: self.per_state / self.per_state_n),
+            yaw_rms_linear=when(twin, lambda: self.rms["yaw_linear"].value() * RAD2DEG),
+            roll_rms=when(truth, lambda: self.rms["roll"].value() * RAD2DEG),
+            h_rms=when(truth, lambda: self.rms["h"].value()),
+            yaw_rms_smoothed=when(truth and self.rms["yaw_smoothed"].count > 0,
+                                  lambda: self.rms["yaw_smoothed"].value() * RAD2DEG),
+            end_err=when(truth, lambda: self.ends["err"]),
+            end_err_linear=when(twin, lambda: self.ends["err_linear"]),
+            ends_within=when(truth, lambda: self.within),
+            comparison=when(truth and twin, comparison),
+            nees_mean=when(truth, lambda: float(self.nees["real"].total
+                                                / self.nees["real"].count)),
+            nees_mean_linear=when(twin, lambda: float(self.nees["linear"].total
+                                                      / self.nees["linear"].count)),
+            nees_inside=when(truth, lambda: inside("real")),
+            nees_inside_linear=when(twin, lambda: inside("linear")),
+            nis_linear=when(twin, lambda: {m: self.nis["linear"][i].value()
+                                           for i, m in enumerate(("roll", "yaw", "h"))}),
+        )

@@ -1,7 +1,7 @@
 """The paper's filter against the extended Kalman filter on the same telemetry, as
 the attitude error grows (docs/validation.md §8):
 
-    python -m dynprop.scenarios.ekf_study --workers 2
+    python -m dynprop.scenarios.studies.ekf_crossover --workers 2
 
 Each case is the linearization report's sweep (``linearization.propagation.
 sweep_changes``): an initial error δ on roll, pitch and yaw, or initial roll,
@@ -27,6 +27,7 @@ from ..config.loader import load_scenario
 from ..linearization.propagation import sweep_changes
 from ..run.ekf import run_ekf
 from ..run.whole import run_scenario
+from . import write_json
 
 CASES = (("attitude", 0.0), ("attitude", 0.1), ("attitude", 1.0), ("attitude", 3.0),
          ("attitude", 5.0), ("attitude", 7.0),
@@ -93,15 +94,13 @@ def markdown(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m dynprop.scenarios.ekf_study")
+    ap = argparse.ArgumentParser(prog="python -m dynprop.scenarios.studies.ekf_crossover")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="also write the rows here")
     args = ap.parse_args(argv)
     rows = study(args.workers)
     print(markdown(rows))
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(rows, fh, indent=2)
+    write_json(args.json, rows)
     return 0
 
 

@@ -3,7 +3,7 @@ filter's covariance beside the spread of κ̂ − κ over a Monte Carlo of dispe
 cases (the scenario's ``montecarlo.dispersions``, drawn exactly as `dynprop
 montecarlo` draws case K).  Every batch starts at t = 0.
 
-    python -m dynprop.scenarios.trim_study --cases 20 --workers 2 \\
+    python -m dynprop.scenarios.studies.trim_batch --cases 20 --workers 2 \\
         --figure docs/figures/trim_batch.png                 # docs/validation.md §7
 
 The analysis of each case knows what the ground knows (``trim.ASSUMED_KNOWN``):
@@ -14,7 +14,6 @@ everything else stay nominal, as they would in flight.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from multiprocessing import get_context
 from pathlib import Path
@@ -26,6 +25,7 @@ from ..files.columns import telemetry_columns
 from ..montecarlo.dispersions import draw_case
 from ..run.simulate import simulate
 from ..trim.batch import choose_batch, estimate_kappa, true_kappa_Nm
+from . import write_json
 
 BATCHES_S = (21541.0, 86400.0, 2 * 86400.0, 4 * 86400.0, 7 * 86400.0)
 # The undispersed case's covariance, finely, for the curve and the 1e-7 crossing.
@@ -141,7 +141,8 @@ def markdown(table: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m dynprop.scenarios.trim_study", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m dynprop.scenarios.studies.trim_batch",
+                                 description=__doc__)
     ap.add_argument("--cases", type=int, default=20)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="also write the table here")
@@ -150,13 +151,9 @@ def main(argv=None) -> int:
     table = study(args.cases, args.workers)
     print(markdown(table))
     if args.figure:
-        from dynprop.plots.trim import plot_batch_study
-
-        from ..figures.run import save_figure
-        save_figure(plot_batch_study(table, BATCH_LABELS, PAPER_TRIMMED_NM), Path(args.figure))
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(table, fh, indent=2)
+        from ..figures.trim import batch_study_figure
+        batch_study_figure(Path(args.figure), table, BATCH_LABELS, PAPER_TRIMMED_NM)
+    write_json(args.json, table)
     return 0
 
 

@@ -2,7 +2,7 @@
 paper's second requirement (abstract, Section 2.2); ``--verify`` flies it.
 
 The batch [from, to] of a run's telemetry goes through the paper's filter once
-more, tuned for a spacecraft near trim (``schema.Trim``) and with the known
+more, tuned for a spacecraft near trim (``config.estimation.Trim``) and with the known
 magnetic torques as modelled torques (Eq. 9).  Its torque states at the batch
 end give κ̂ ± σ by generalised least squares against the solar torque of a unit
 κ over the same batch (``estimator.trim``).  What that assumes known is
@@ -16,17 +16,26 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from dynprop.eom.gyrostat import (
+    gravity_gradient_torque,
+    magnetic_torque,
+    solar_torque,
+    unloading_dipole,
+)
 from dynprop.estimator import model as em
+from dynprop.estimator.covariance import torque_noise_density
 from dynprop.estimator.kalman import FilterResult, kalman_filter, unpack
 from dynprop.estimator.preprocess import yaw_momentum
 from dynprop.estimator.transition import discretize
 from dynprop.estimator.trim import KappaFit, Recommendation, equivalent_states, fit_kappa, recommend
 from dynprop.sim import geomag
-from dynprop.sim.truth import TruthStream
+from dynprop.sim.frames import nadir_body
 
+from ..bridge.inputs import filter_inputs, initial_prior, telemetry_inputs
 from ..config import build
-from ..config.schema import QUARTER_ORBIT_S, Scenario
-from ..run.whole import filter_inputs, initial_prior, telemetry_inputs
+from ..config.estimation import QUARTER_ORBIT_S
+from ..config.schema import Scenario
+from ..units import DAY_S, DEG
 
 ASSUMED_KNOWN = (
     "the Sun's direction and distance (the ephemeris), the Earth's shadow and the "
@@ -112,13 +121,11 @@ def solar_unit_torque(s: Scenario, batch: Batch, every: int = SHAPE_EVERY
     shadow in an Earth-pointing body (as the truth computes it), every ``every``-th
     sample: times, torques (M, 2), and the sunlit share of the batch.  It does not
     depend on ``environment.solar.enabled``, which is the truth's business."""
-    env = build.build_environment(s)
-    stream = TruthStream(build.build_spacecraft(s), build.orbit(s), env,
-                         build.build_control(s), build.build_initial(s), build.epoch(s),
-                         (batch.k1 - 1) * batch.dt_s, batch.dt_s,
-                         rng=np.random.default_rng(0))   # no draws: ``sun`` rolls nothing out
-    lever = np.asarray(env.solar.lever_axis, dtype=float)
-    day = int(round(86400.0 / batch.dt_s))
+    # No draws: ``sun`` rolls nothing out.
+    stream = build.truth_stream(s, np.random.default_rng(0), (batch.k1 - 1) * batch.dt_s,
+                                batch.dt_s)
+    lever = np.asarray(stream.environment.solar.lever_axis, dtype=float)
+    day = int(round(DAY_S / batch.dt_s))
     t, torque, sunlit = [], [], 0
     for a in range(batch.k0, batch.k1, day):
         b = min(a + day, batch.k1)
@@ -126,7 +133,8 @@ def solar_unit_torque(s: Scenario, batch: Batch, every: int = SHAPE_EVERY
         sunlit += int(np.count_nonzero(scale > 0))
         keep = (np.arange(a, b) - batch.k0) % every == 0
         t.append(ts[keep])
-        torque.append(np.cross(lever, sun_r[keep])[:, [0, 2]] * scale[keep, None])
+        # Earth pointing: the body axes are the orbit frame's.
+        torque.append(solar_torque(sun_r[keep], scale[keep, None], lever)[:, [0, 2]])
     return np.concatenate(t), np.concatenate(torque), sunlit / (batch.k1 - batch.k0)
 
 
@@ -137,25 +145,21 @@ def _filled(t_s: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def gravity_gradient(s: Scenario, roll_rad: np.ndarray, pitch_rad: np.ndarray) -> np.ndarray:
-    """(N, 3) body torque 3ω0² n̂ × J n̂ of the nominal inertia at the measured roll
-    and pitch (the nadir n̂ = R2(θ) R1(φ) ẑ does not depend on yaw), as ``eom.gyrostat``
-    computes it.  The paper's model leaves it out (Eq. 6); at the trim level it
-    matters: 3ω0²(I_z − I_y) is 7e-7 N m per degree of roll."""
+    """(N, 3) gravity-gradient torque of the nominal inertia at the measured roll and
+    pitch (the nadir does not depend on yaw), the truth's law (``eom.gyrostat``).
+    The paper's model leaves it out (Eq. 6); at the trim level it matters:
+    3ω0²(I_z − I_y) is 7e-7 N m per degree of roll."""
     J = build.build_spacecraft(s).J
     w0 = build.orbit(s).rate_radps
-    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
-    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
-    # Third column of C_BR = R2(θ) R1(φ) R3(ψ).
-    n = np.column_stack([-sp * cr, sr, cp * cr])
-    return 3.0 * w0**2 * np.cross(n, n @ J.T)
+    return gravity_gradient_torque(nadir_body(roll_rad, pitch_rad), J, 3.0 * w0**2)
 
 
 def known_torques(s: Scenario, t_s: np.ndarray, speeds_radps: np.ndarray,
                   roll_rad: np.ndarray | None = None, pitch_rad: np.ndarray | None = None
                   ) -> np.ndarray:
     """(N, 2) roll and yaw torques known from the telemetry and the scenario
-    (``ASSUMED_KNOWN``): the torquers (the unloading law of ``sim.control`` on the
-    telemetered h, crossed with the field model, Earth pointing), the commanded
+    (``ASSUMED_KNOWN``): the torquers (the truth's unloading law, ``eom.gyrostat``, on
+    the telemetered h, crossed with the field model, Earth pointing), the commanded
     dipole profile, and the gravity gradient at the measured roll and pitch."""
     t_s = np.asarray(t_s, dtype=float)
     orbit, env, ctrl = build.orbit(s), build.build_environment(s), build.build_control(s)
@@ -167,23 +171,27 @@ def known_torques(s: Scenario, t_s: np.ndarray, speeds_radps: np.ndarray,
     h = _filled(t_s, yaw_momentum(speeds_radps, build.yaw_factors(s)))
     m = np.zeros((len(h), 3))
     if ctrl.enabled and ctrl.magnetic_unloading:
-        t_des = np.zeros((len(h), 3))
-        t_des[:, 2] = -ctrl.unloading_gain_per_s * h
-        m = np.clip(np.cross(field, t_des) / (field @ field), -ctrl.torquer_max_Am2,
-                    ctrl.torquer_max_Am2)
+        m = unloading_dipole(field, h, ctrl.unloading_gain_per_s, ctrl.torquer_max_Am2,
+                             floor=0.0)
     if mag.enabled:
         m = m + mag.profile(t_s)
-    torque = np.cross(m, field)
+    torque = magnetic_torque(m, field)
     if env.gravity_gradient.enabled and roll_rad is not None:
         pitch = np.zeros_like(t_s) if pitch_rad is None else _filled(t_s, pitch_rad)
         torque += gravity_gradient(s, _filled(t_s, roll_rad), pitch)
     return torque[:, [0, 2]]
 
 
+def trim_q_Nm2s(s: Scenario) -> float:
+    """The batch filter's white roll and yaw torque density q = δN² τ ((N m)² s),
+    Eq. 45 with ``trim.torque_error_Nm`` and ``trim.correlation_time_s``."""
+    return torque_noise_density(s.trim.torque_error_Nm, s.trim.correlation_time_s)
+
+
 def trim_noise(s: Scenario, noise: em.ProcessNoise) -> em.ProcessNoise:
     """The batch filter's process noise: Eq. 45's white torque density from
     ``trim.torque_error_Nm`` and no random walk of the torque states."""
-    q = s.trim.q_Nm2s
+    q = trim_q_Nm2s(s)
     return dataclasses.replace(noise, q_x=q, q_z=q, q_px=0.0, q_pz=0.0, q_cx=0.0, q_cz=0.0)
 
 
@@ -216,7 +224,7 @@ def estimate_kappa(s: Scenario, cols: dict[str, np.ndarray], batch: Batch,
     t = t_all[sel]
     params, noise = build.estimator_model(s)
     disc = discretize(params, trim_noise(s, noise), batch.dt_s)
-    pitch = cols["pitch_deg"][sel] * (np.pi / 180.0) if "pitch_deg" in cols else None
+    pitch = cols["pitch_deg"][sel] * DEG if "pitch_deg" in cols else None
     known = known_torques(s, t, pick[2], pick[0], pitch)
     meas, u, extra = filter_inputs(s, params, *pick, known_Nm=known)
     n = len(t)

@@ -2,9 +2,10 @@
 own telemetry every N days and moves the tab as `dynprop trim` recommends, from
 the next sample on (issue 15, item 4; docs/trim.md).
 
-It lives in the producer, beside the truth it steers.  At the end of each span of
-N whole days (N day windows) the span's telemetry goes through
-``trim.estimate_kappa``: the same batch filter, known torques, fit and 3σ rule as
+It lives in the producer, beside the truth it steers: ``TrimSteering`` is the
+run engine's steering (``run.producer``), which the command layer hands the run.
+At the end of each span of N whole days (N day windows) the span's telemetry goes
+through ``batch.estimate_kappa``: the same batch filter, known torques, fit and 3σ rule as
 `dynprop trim`, knowing the tab it commanded last.  A significant κ̂ moves the
 truth's tab (``TruthStream.retrim``); the run's own filters see only the
 telemetry, as before, and the linear twin follows the truth's torques.  Memory is
@@ -26,12 +27,12 @@ import numpy as np
 from ..config import build
 from ..config.schema import Scenario
 from ..files.csvio import CsvAppender, read_csv
+from ..units import RAD2DEG
 from .batch import TrimError, choose_batch, estimate_kappa, true_kappa_Nm
 
 LOOP_COLUMNS = ("day", "trim_tab_deg", "kappa_true_Nm", "torquer_dipole_rms_Am2",
                 "torquer_saturated_fraction", "h_rms_Nms", "roll_rms_deg", "yaw_rms_deg",
                 "kappa_Nm", "kappa_sigma_Nm", "trim_tab_deg_new")
-RAD2DEG = 180.0 / np.pi
 
 
 def with_tab(s: Scenario, trim_tab_deg: float) -> Scenario:
@@ -107,3 +108,17 @@ class TrimLoop:
     def close(self) -> None:
         if self.file is not None:
             self.file.close()
+
+
+class TrimSteering:
+    """The trim loop as a streamed run's steering (``run.producer``'s module doc):
+    a ``TrimLoop`` in the producer, and summary.json's ``trim_loop`` section."""
+
+    def __init__(self, s: Scenario):
+        self.s = s
+
+    def start(self, s: Scenario, stream, out: Path | None) -> TrimLoop:
+        return TrimLoop(s, stream, out)
+
+    def summary(self, stage: Path) -> dict:
+        return {"trim_loop": loop_summary(self.s, Path(stage) / "trim_loop.csv")}

@@ -20,6 +20,7 @@ from .batch import (
     TrimResult,
     choose_batch,
     estimate_kappa,
+    trim_q_Nm2s,
     true_kappa_Nm,
 )
 
@@ -95,7 +96,7 @@ def report_dict(s: Scenario, r: TrimResult, truth: bool) -> dict:
         "estimated": list(ESTIMATED),
         "tuning": {"torque_error_Nm": s.trim.torque_error_Nm,
                    "correlation_time_s": s.trim.correlation_time_s,
-                   "q_Nm2s": s.trim.q_Nm2s},
+                   "q_Nm2s": trim_q_Nm2s(s)},
         "kappa_Nm": f.kappa_Nm, "kappa_sigma_Nm": f.sigma_Nm,
         "constant_torque_Nm": {"roll": f.constants_Nm[0], "yaw": f.constants_Nm[1]},
         "constant_torque_sigma_Nm": {"roll": f.constants_sigma_Nm[0],
@@ -194,13 +195,13 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
     """Fly the recommended tab from the start to the batch end (the same span and
     seed; telemetry written), into ``stage``/verify, and estimate κ again there."""
     from ..files.rundir import staged_run_dir
-    from ..run.estimate import run_to_directory
+    from ..run.streamrun import stream_to_directory
     new = load_scenario(run_dir / "scenario.yaml", [
         f"environment.solar.trim_tab_deg={r.rec.trim_tab_deg_new!r}",
         f"duration_s={r.batch.to_s!r}", "output.telemetry=true"])
     out = stage / "verify"
     with staged_run_dir(out) as vstage:
-        run_to_directory(new, vstage)
+        stream_to_directory(new, vstage)
     _, cols, _ = read_run(out, None)
     after = estimate_kappa(new, cols, choose_batch(cols["t_s"], new.sample_interval_s,
                                                    r.batch.from_s, r.batch.to_s))
@@ -215,9 +216,7 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
 def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = None,
              telemetry: Path | None = None, do_verify: bool = False) -> dict:
     """Everything `dynprop trim` does; returns the trim.json dictionary."""
-    from dynprop.plots.trim import plot_trim
-
-    from ..figures.run import save_figure
+    from ..figures.trim import trim_figure
     from ..files.rundir import staged_run_dir
     if (Path(run_dir) / "trim_loop.csv").is_file():
         raise TrimError(f"{run_dir}: this run moved its tab as it flew (trim.every_days, see "
@@ -232,10 +231,8 @@ def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = No
         (stage / "trim.md").write_text(report_md(d))
         true_solar = _truth_solar(run_dir, r.batch)
         filt = r.torque_xz - np.asarray(r.fit.constants_Nm)
-        fig = plot_trim(r.shape_t_s, r.shape_xz, r.fit.kappa_Nm, r.fit.sigma_Nm, r.rows_t_s,
-                        filt, _title(s, r, d),
-                        *(true_solar if true_solar is not None else (None, None)))
-        save_figure(fig, stage / "trim.png")
+        trim_figure(stage / "trim.png", r.shape_t_s, r.shape_xz, r.fit.kappa_Nm,
+                    r.fit.sigma_Nm, r.rows_t_s, filt, _title(s, r, d), true_solar)
     return d
 
 

@@ -14,17 +14,15 @@ from estimator.covariance import (
     _compose,
     _discrete_model,
     _power,
-    _reduced,
     _rows,
     alpha,
     approx_yaw_variance,
     care_steady_state,
     closed_form_steady_state,
     continuous_R,
-    covariance_report,
-    format_covariance_report,
     h_variance,
     periodic_gap_covariance,
+    reduced,
     riccati_rates,
     ripple_noise_density,
     roll_tach_steady_state,
@@ -34,6 +32,7 @@ from estimator.covariance import (
     van_loan,
     yaw_variance,
 )
+from estimator.covariance_report import covariance_report, format_covariance_report
 from estimator.kalman import Measurements, kalman_filter, unpack
 from estimator.model import (
     H_WHEEL,
@@ -51,7 +50,7 @@ from estimator.transition import discretize
 from .cov_helpers import cov_dev
 
 W0 = 2 * np.pi / 86164.0905
-# scenarios/schema.py defaults for the torque random walks (not in the paper)
+# scenarios/config/estimation.py defaults for the torque random walks (not in the paper)
 Q_RW = 3e-18
 
 
@@ -184,7 +183,7 @@ def test_nutation_averaged_limit(sign):
                        tach_noise_3sigma_rpm=0.0978 * k, tach_quantum_rpm=0.0163 * k)
     Rc = continuous_R(p.H_Nms, sens)
     assert Rc == pytest.approx(continuous_R(p.H_Nms))
-    Pt = _reduced(roll_tach_steady_state(p, noise, sens)["P_prior"], p)
+    Pt = reduced(roll_tach_steady_state(p, noise, sens)["P_prior"], p)
     C = care_steady_state(W0, p.H_Nms, Rc, noise.q_x, noise.q_z, noise.q_w)
     assert Pt[1, 1] == pytest.approx(C[1, 1], rel=3e-3)
     assert Pt[0, 1] == pytest.approx(C[0, 1], rel=1e-2)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 
+from estimator.covariance import PAPER_SIGMA_YAW_DEG
 from plots.consistency import plot_consistency
 from plots.errors import plot_errors
 
@@ -38,8 +39,9 @@ def _titles(fig) -> str:
 
 def test_the_difference_panel_reports_the_full_rate_extreme():
     gap = np.zeros(N, dtype=bool)
-    fig = plot_errors(T, gap, _series(True), "decimated")
-    without = plot_errors(T, gap, _series(False), "rows only")
+    fig = plot_errors(T, gap, _series(True), "decimated", paper_sigma_deg=PAPER_SIGMA_YAW_DEG)
+    without = plot_errors(T, gap, _series(False), "rows only",
+                          paper_sigma_deg=PAPER_SIGMA_YAW_DEG)
     try:
         assert "max |Δ| = 0.00075 deg at 21.94 h" in _titles(fig)
         assert "0.00075" not in _titles(without)

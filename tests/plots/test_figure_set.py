@@ -1,5 +1,5 @@
-"""comparison.npz and the figure set drawn from it (``scenarios.comparison``,
-``scenarios.plotting``): the keys written for each producer (`run` with its linear
+"""comparison.npz and the figure set drawn from it (``scenarios.files.comparison``,
+``scenarios.figures.run``): the keys written for each producer (`run` with its linear
 twin, `estimate` with or without a truth), the set of figures they give, and
 `dynprop plot` redrawing exactly what `dynprop run` drew."""
 
@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.config.loader import load_scenario, resolved_yaml
+from scenarios.config.loader import load_scenario
+from scenarios.config.schema import resolved_yaml
 from scenarios.figures.run import RUN_FIGURES, figure_set, plot_run
-from scenarios.files.comparison import comparison_arrays
+from scenarios.files.comparison import ComparisonInputs, comparison_arrays
 
 N = 4000
 DT = 0.512
@@ -44,11 +45,10 @@ def fake_runs(truth: bool, twin: bool, seed: int = 0):
     truth_model = real.x + rng.standard_normal((N, 9)) * 1e-4 if truth else None
     linear = _filter_result(rng) if twin else None
     twin_model = linear.x + rng.standard_normal((N, 9)) * 1e-4 if twin else None
-    sim = SimpleNamespace(truth=SimpleNamespace(euler_rad=rng.standard_normal((N, 3)) * 1e-3)) \
-        if truth else None
-    return SimpleNamespace(params=SimpleNamespace(omega_n_radps=-7.3e-5), real=real,
-                           smoothed=SimpleNamespace(x=real.x * 0.5), linear=linear,
-                           twin_model=twin_model, truth_model=truth_model, sim=sim)
+    euler = rng.standard_normal((N, 3)) * 1e-3 if truth else None
+    return ComparisonInputs(-7.3e-5, real, truth_model=truth_model, smoothed_x=real.x * 0.5,
+                            linear_x=None if linear is None else linear.x,
+                            twin_model=twin_model, true_euler_rad=euler)
 
 
 def fake_telemetry(n=N, rng=None):
@@ -93,7 +93,7 @@ def test_comparison_real_minus_linear_is_differenced_before_rounding():
     once, in deg (roll, yaw) and N m s (h); err_real − err_linear from the float32
     arrays would round each error first."""
     runs, c = arrays(True, True)
-    exact = (runs.real.x - runs.truth_model) - (runs.linear.x - runs.twin_model)
+    exact = (runs.real.x - runs.truth_model) - (runs.linear_x - runs.twin_model)
     deg = 180.0 / np.pi
     expected = np.column_stack([exact[:, 0] * deg, exact[:, 2] * deg, exact[:, 4]])
     np.testing.assert_array_equal(c["err_real_minus_linear"], expected.astype(np.float32))

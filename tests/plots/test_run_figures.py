@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
+from estimator.covariance import PAPER_SIGMA_YAW_DEG  # noqa: E402
 from plots import reduce  # noqa: E402
 from plots.consistency import nees_verdict, plot_consistency  # noqa: E402
 from plots.errors import plot_errors, plot_estimates  # noqa: E402
@@ -41,7 +42,7 @@ def _without_twin(series: dict) -> dict:
 
 def figure_calls(run: dict, subset: str = "full") -> dict:
     """name -> zero-argument callable drawing that figure from ``run`` as the given
-    subset of comparison.npz would (``scenarios.plotting`` does the same)."""
+    subset of comparison.npz would (``scenarios.figures.run`` does the same)."""
     t, gap = run["t_s"], run["gap"]
     truth = subset != "no_truth"
     series = run["series"] if subset == "full" else _without_twin(run["series"])
@@ -50,8 +51,10 @@ def figure_calls(run: dict, subset: str = "full") -> dict:
     estimates = {n: {"unit": s["unit"], "estimate": s["real"], "sigma": s["sigma"]}
                  for n, s in run["series"].items()}
     return {
-        "errors": (lambda: plot_errors(t, gap, series, TITLE, 3600.0)) if truth
-        else (lambda: plot_estimates(t, gap, estimates, TITLE, 3600.0)),
+        "errors": (lambda: plot_errors(t, gap, series, TITLE, 3600.0,
+                                       paper_sigma_deg=PAPER_SIGMA_YAW_DEG)) if truth
+        else (lambda: plot_estimates(t, gap, estimates, TITLE, 3600.0,
+                                     paper_sigma_deg=PAPER_SIGMA_YAW_DEG)),
         "torques": lambda: plot_torques(t, gap, run["est"], run["tsig"], TITLE,
                                         truth=run["tru"] if truth else None),
         "consistency": lambda: plot_consistency(
@@ -193,7 +196,8 @@ def test_difference_panel_holds_its_maximum_whatever_the_reference(run, ref_over
     axis still holds every value, and the reference is drawn only when it fits."""
     series = {"yaw": dict(run["series"]["yaw"])}
     series["yaw"]["reference"] = (ref_over_max * YAW_DIFF_MAX, "paper σ_yaw (Eq. 56)")
-    fig = plot_errors(run["t_s"], run["gap"], series, TITLE, 3600.0)
+    fig = plot_errors(run["t_s"], run["gap"], series, TITLE, 3600.0,
+                      paper_sigma_deg=PAPER_SIGMA_YAW_DEG)
     try:
         ax = _panels(fig)["Δ yaw"]
         lo, hi = ax.get_ylim()

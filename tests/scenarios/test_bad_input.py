@@ -13,13 +13,8 @@ import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.config.loader import (
-    MAX_PROBLEM_LINES,
-    ScenarioError,
-    closest,
-    load_scenario,
-    validate,
-)
+from scenarios.config.loader import ScenarioError, load_scenario, validate
+from scenarios.config.suggestions import MAX_PROBLEM_LINES, closest
 from scenarios.files.csvio import write_csv
 
 

@@ -23,8 +23,8 @@ from estimator.consistency import chi2_bounds, fraction_inside, nees
 from estimator.kalman import unpack
 from scenarios.cli import main
 from scenarios.config.loader import load_scenario
+from scenarios.files.columns import STATE_COLUMNS
 from scenarios.files.csvio import read_csv
-from scenarios.files.summary import STATE_COLUMNS
 from scenarios.run.whole import run_scenario
 
 from .mc_helpers import predicted_sun_gaps_h

@@ -299,9 +299,9 @@ def test_out_that_is_a_file_is_refused(tmp_path, capsys):
 
 
 def _interrupt_on_call(monkeypatch, which: int) -> list[str]:
-    """Make the runner's ``write_csv`` write half a file, then raise KeyboardInterrupt,
-    on its ``which``-th call (1 = truth.csv, 2 = telemetry.csv)."""
-    import scenarios.run.simulate as runner
+    """Make the simulation writer's ``write_csv`` write half a file, then raise
+    KeyboardInterrupt, on its ``which``-th call (1 = truth.csv, 2 = telemetry.csv)."""
+    import scenarios.files.simulation as runner
     real = runner.write_csv
     calls: list[str] = []
 
@@ -346,7 +346,7 @@ def test_interrupt_leaves_no_parent_directories(tmp_path, monkeypatch, capsys):
 
 
 def test_internal_error_exits_1_with_one_line(tmp_path, monkeypatch, capsys):
-    import scenarios.run.simulate as runner
+    import scenarios.commands as runner
 
     def broken(*args, **kwargs):
         raise RuntimeError("integrator exploded")

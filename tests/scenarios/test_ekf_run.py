@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from estimator import ekf_model as m
+from scenarios.bridge.coordinates import external_torque
 from scenarios.config import build
 from scenarios.config.loader import load_scenario
 from scenarios.run.ekf import run_ekf
 from scenarios.run.simulate import simulate
-from scenarios.run.whole import EXTERNAL, run_scenario
+from scenarios.run.whole import run_scenario
 
 DEG = np.pi / 180
 
@@ -38,7 +39,7 @@ def test_the_process_model_propagates_the_truth():
     H = tr.wheel_speeds_radps @ (sc.wheel_inertias * sc.wheel_axes[:, 1])
     dt = s.sample_interval_s
     Hdot, hdot = np.append(np.diff(H) / dt, 0.0), np.append(np.diff(tr.h_Nms) / dt, 0.0)
-    ext = sum(tr.torques[k] for k in EXTERNAL)
+    ext = external_torque(tr)
     u = np.column_stack([H, Hdot - ext[:, 1], hdot, ext[:, 0], ext[:, 2]])
     params, _ = build.estimator_model(s)
     pm = m.pack_params(sc.J, params.omega0_radps, dt, dict.fromkeys(m.NOISE_NAMES, 0.0))

@@ -8,6 +8,7 @@ import re
 import numpy as np
 import pytest
 
+from eom.linear import COEFFICIENT_INDEX, eq3_coefficients, eq5_only, model_matrices
 from scenarios.cli import main
 from scenarios.config import build
 from scenarios.config.loader import load_scenario
@@ -22,6 +23,7 @@ from scenarios.linearization.propagation import (
     variant,
 )
 from scenarios.run.simulate import simulate
+from sim.linearize import linearize_about_nominal
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +36,8 @@ def test_jacobian_reproduces_eq3_to_1e9(equinox):
     Ix, Iy, Iz = np.diag(sc.J)
     jac, raw = co.jacobian_coefficients(sc, orbit)
     assert raw["H_Nms"] < 0  # signed H (errata 1)
-    eq3 = co._eq3(Ix, Iy, Iz, raw["H_Nms"], orbit.rate_radps)
-    for name in co.COEFFICIENT_INDEX:
+    eq3 = eq3_coefficients(Ix, Iy, Iz, raw["H_Nms"], orbit.rate_radps)
+    for name in COEFFICIENT_INDEX:
         assert jac[name] == pytest.approx(eq3[name], rel=1e-9), name
     # Terms zero in exact arithmetic: what is left is round-off of entries up to 0.037
     # (ε·0.037 = 8e-18; measured 7e-19), so 1e-15 absolute.
@@ -55,18 +57,18 @@ def test_equal_inertias_make_the_jacobian_eq11c(equinox):
     orbit = build.orbit(equinox)
     w0 = orbit.rate_radps
     sc = _spacecraft_with(equinox, [I_, I_, I_])
-    lin = co.linearize_about_nominal(sc, orbit)
+    lin = linearize_about_nominal(sc, orbit)
     wn = lin.H_Nms / I_
-    F_jac, G_jac = co.model_matrices(lin.wrt_state, lin.wrt_input, wn)
+    F_jac, G_jac = model_matrices(lin.wrt_state, lin.wrt_input, wn)
     F_11, G_11 = co.eq11_matrices(w0, wn, lin.H_Nms)
     assert co._max_rel(F_jac, F_11) < 1e-9
     assert co._max_rel(G_jac, G_11) < 1e-9
     # Ix = Iz alone: the Jacobian is Eq. 3 with Ix = Iz (Eq. 5 exact), still off Eq. 11c by
     # the Eq. 6 terms, ~ω0(Iy − I)/H = 1.4e-3.
     sc = _spacecraft_with(equinox, [I_, Iy, I_])
-    lin = co.linearize_about_nominal(sc, orbit)
-    F_jac, _ = co.model_matrices(lin.wrt_state, lin.wrt_input, wn)
-    F_eq5 = co._matrix_from_named(co.eq5_only(I_, Iy, I_, lin.H_Nms, w0), wn)
+    lin = linearize_about_nominal(sc, orbit)
+    F_jac, _ = model_matrices(lin.wrt_state, lin.wrt_input, wn)
+    F_eq5 = co._matrix_from_named(eq5_only(I_, Iy, I_, lin.H_Nms, w0), wn)
     assert co._max_rel(F_jac, F_eq5) < 1e-9
     assert 1e-3 < co._max_rel(F_jac, F_11) < 1e-2
 

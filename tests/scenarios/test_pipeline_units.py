@@ -2,12 +2,13 @@
 
 import numpy as np
 
-from estimator.model import H_WHEEL, R, Y
+from estimator.model import H_WHEEL, R, Y, project_torques
 from estimator.transition import psi_closed
 from scenarios.config import build
 from scenarios.config.loader import validate
 from scenarios.run.simulate import simulate
-from scenarios.run.whole import euler_rates, project_torques, run_scenario
+from scenarios.run.whole import run_scenario
+from sim.frames import euler312_rates as euler_rates
 
 
 def _scenario(**overrides):

@@ -1,6 +1,6 @@
 """docs/scenario-reference.md against the schema and the loader (issue 13).
 
-The document is generated (``python -m scenarios.reference --out ...``, ``make docs``).
+The document is generated (``python -m scenarios.config.reference --out ...``, ``make docs``).
 Besides checking that the committed file is current, these tests read the committed
 file as a user would and check what it says against what the loader does, without
 the generator's help: a key marked "(required)" is rejected when left out; every
@@ -96,7 +96,7 @@ def _ids(rows):
 def test_committed_reference_is_current():
     assert DOC.read_text() == reference.render(), \
         "docs/scenario-reference.md is stale: regenerate with `make docs` " \
-        "(python -m scenarios.reference --out docs/scenario-reference.md)"
+        "(python -m scenarios.config.reference --out docs/scenario-reference.md)"
 
 
 def test_check_and_out_options(tmp_path, capsys):

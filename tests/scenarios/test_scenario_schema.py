@@ -22,9 +22,9 @@ from scenarios.config.loader import (
     bundled_names,
     load_scenario,
     read_raw,
-    resolved_yaml,
     validate,
 )
+from scenarios.config.schema import resolved_yaml
 from sim import ephemeris
 
 RPM = 2.0 * math.pi / 60.0

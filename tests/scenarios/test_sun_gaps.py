@@ -1,4 +1,4 @@
-"""Sun gaps (``scenarios.outputs.sun_gaps``) on synthetic yaw-presence masks, and
+"""Sun gaps (``scenarios.samples.sun_gaps``) on synthetic yaw-presence masks, and
 what ``summarize`` reports at their ends.
 
 A gap is a run of consecutive samples without a ground yaw, reported as
@@ -22,7 +22,9 @@ import pytest
 from estimator.model import N_STATES, Y
 from scenarios.config import build
 from scenarios.config.loader import load_scenario
-from scenarios.files.summary import summarize, sun_gaps
+from scenarios.files.summary import assemble_summary
+from scenarios.run.statistics import whole_run_statistics
+from scenarios.samples import sun_gaps
 
 DT = 0.512
 RAD2DEG = 180.0 / np.pi
@@ -118,6 +120,13 @@ def test_gaps_of_random_masks_match_the_definition(seed):
 
 
 # --------------------------------------------------------------------------- summarize
+
+
+def summarize(s, runs, t_s, present, nees_data) -> dict:
+    """summary.json's dict of a run held whole, as `dynprop estimate` assembles it."""
+    return assemble_summary(s, runs.params, runs.real.backend, runs.truth_model is not None,
+                            runs.linear is not None,
+                            whole_run_statistics(s, runs, t_s, present, nees_data))
 
 
 def synthetic_runs(s, n: int, seed: int = 0):

@@ -243,8 +243,8 @@ def test_rk4_matches_cvodes_over_six_hours(spacecraft, orbit):
     c_br = dyn.dcm_from_quat(x[0:4])
     w_br = x[4:7] - c_br @ ca.vertcat(0, -prm["w0"], 0)
     sun_r = dyn.rot_about_y(prm["w0"] * tt) @ ca.DM(sun0)
-    torque = (dyn.solar_torque(c_br, sun_r, prm["solar_coef"], prm["solar_axis"])
-              + dyn.magnetic_torque(c_br, prm["field_r"], prm["m_res"]))
+    torque = (dyn.solar_torque(c_br @ sun_r, prm["solar_coef"], prm["solar_axis"])
+              + dyn.magnetic_torque(prm["m_res"], c_br @ prm["field_r"]))
     w_dot, wheel_dot = dyn.motor_torque_rates(x[4:7], x[7:], ca.DM.zeros(n), torque, prm["J"],
                                               prm["Js_inv"], prm["Iw"], prm["A"])
     ode = ca.vertcat(dyn.quat_rate(x[0:4], w_br), w_dot, wheel_dot)

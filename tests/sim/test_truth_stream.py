@@ -16,10 +16,11 @@ import pytest
 from sim.control import Control
 from sim.environment import Environment
 from sim.frames import GeoOrbit
+from sim.history import TORQUE_SOURCES
 from sim.sensors import SensorSuite, draw_ahead, drawn_rows
 from sim.spacecraft import goes_next
 from sim.telemetry import TelemetryRows, make_telemetry
-from sim.truth import TORQUE_SOURCES, InitialState, TruthResult, TruthStream
+from sim.truth import InitialState, TruthResult, TruthStream
 
 # 03:30 UTC on the equinox: local midnight at 75° W (the eclipse, ~70 min) falls
 # 1.5 h into the 3 h run.

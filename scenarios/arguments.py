@@ -1,0 +1,116 @@
+"""The ``dynprop`` command line's arguments (``cli`` runs the commands): one
+sub-command each, bad arguments reported as one line with exit status 2."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports bad arguments as one line (no usage block), exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"dynprop: error: {message}\n")
+
+
+def _scenario_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenario", metavar="SCENARIO", help="a YAML path or a bundled name")
+    p.add_argument("--seed", help="override the scenario seed")
+    p.add_argument("--duration-s", help="override the scenario duration")
+    p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override any scenario key (repeatable); VALUE is YAML")
+
+
+def _out_args(p: argparse.ArgumentParser, help: str, required: bool = True,
+              force: str = "replace a non-empty --out") -> None:
+    p.add_argument("--out", required=required, type=Path, help=help)
+    p.add_argument("--force", action="store_true", help=force)
+
+
+def _whole(text: str, minimum: int) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"{value} must be at least {minimum}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    return _whole(text, 1)
+
+
+def _case_number(text: str) -> int:
+    return _whole(text, 0)
+
+
+def _case_list(text: str) -> tuple[int, ...]:
+    return tuple(_case_number(part) for part in text.split(",") if part.strip())
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+    parser = _Parser(
+        prog="dynprop",
+        description="Dynamic attitude propagation for momentum-biased Earth-pointing "
+                    "spacecraft (GOES-Next): nonlinear truth vs the paper's linear filter.")
+    parser.add_argument("--version", action="version", version=f"dynprop {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sim = sub.add_parser("simulate", help="truth + telemetry: scenario.yaml, truth.csv, "
+                         "telemetry.csv")
+    _scenario_args(sim)
+    _out_args(sim, "new run directory")
+    run = sub.add_parser("run", help="truth, telemetry, the filter on it and on the linear "
+                         "twin; errors, summary and figures")
+    _scenario_args(run)
+    _out_args(run, "new run directory (default runs/NAME-TIME)", required=False)
+    run.add_argument("--montecarlo-case", type=_case_number, metavar="K",
+                     help="fly Monte Carlo case K of the scenario's dispersions (the filter "
+                     "stays nominal), reproducing `dynprop montecarlo`'s case K bit for bit")
+    mc = sub.add_parser("montecarlo", help="dispersed Monte Carlo set: ensemble errors, "
+                        "averaged NEES, yaw at the Sun-gap end; resumable")
+    _scenario_args(mc)
+    mc.add_argument("--runs", required=True, type=_positive_int, metavar="N",
+                    help="number of cases (0 … N−1)")
+    mc.add_argument("--workers", type=_positive_int, metavar="K",
+                    help="local worker processes (default: every core)")
+    mc.add_argument("--scheduler", metavar="ADDRESS",
+                    help="run on this dask.distributed scheduler (e.g. tcp://host:8786)")
+    _out_args(mc, "set directory; rerunning the same command resumes it",
+              force="replace an --out that holds something else")
+    mc.add_argument("--keep-trajectories", type=_case_list, default=(), metavar="K,K,…",
+                    help="also store these cases' whole trajectories")
+    mc.add_argument("--retry-failed", action="store_true", help="rerun cases that failed")
+    est = sub.add_parser("estimate", help="the filter and smoother on a telemetry file "
+                         "(dropouts and other cadences on the filter step allowed): "
+                         "estimate.csv, smoothed.csv, summary.json, plots/")
+    est.add_argument("telemetry", type=Path, metavar="TELEMETRY.csv")
+    est.add_argument("--scenario", required=True, help="scenario (e.g. the run's scenario.yaml)")
+    est.add_argument("--truth", type=Path, metavar="TRUTH.csv",
+                     help="a truth.csv: also compute the errors, NEES and run's summary")
+    _out_args(est, "new output directory")
+    sub.add_parser("scenarios", help="list the bundled scenarios")
+    obs = sub.add_parser("observability", help="rank tables of the paper's Section 4")
+    _scenario_args(obs)
+    cov = sub.add_parser("covariance", help="steady-state yaw accuracy of Section 6")
+    _scenario_args(cov)
+    lin = sub.add_parser("linearization", help="linearization-validation report: Jacobian vs "
+                         "the paper, nonlinear vs linear propagation, error budget")
+    _scenario_args(lin)
+    _out_args(lin, "new report directory")
+    trim = sub.add_parser("trim", help="solar trim-tab setting from the estimated torque: "
+                          "κ ± σ and the tab move (RUN_DIR/trim/); --verify flies it")
+    trim.add_argument("run_dir", type=Path, metavar="RUN_DIR",
+                      help="a `dynprop run` or `dynprop estimate` directory")
+    trim.add_argument("--from-s", type=float, metavar="T", help="batch start (s, default: the "
+                      "telemetry's first sample)")
+    trim.add_argument("--to-s", type=float, metavar="T", help="batch end (s, default: the last)")
+    trim.add_argument("--telemetry", type=Path, metavar="FILE",
+                      help="telemetry CSV (default: RUN_DIR/telemetry.csv)")
+    trim.add_argument("--verify", action="store_true", help="fly the recommended tab over the "
+                      "same span (RUN_DIR/trim/verify/) and compare before and after")
+    plot = sub.add_parser("plot", help="(re)draw the figures of a run or Monte Carlo directory")
+    plot.add_argument("run_dir", type=Path, metavar="DIR")
+    return parser

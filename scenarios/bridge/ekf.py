@@ -1,0 +1,64 @@
+"""The extended Kalman filter's design and inputs from a scenario and its telemetry.
+
+The EKF (``estimator.ekf``) gets the same preprocessing as the paper's filter
+(``inputs.filter_inputs``: the same yaw variances with the DSS correlation
+inflation, the same N_w* = ḣ from the tachometers, the same modelled torques),
+plus what only it uses: the Earth sensor's pitch and the pitch wheels' momentum H
+and its rate Ḣ.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from dynprop.estimator import ekf_model as m
+from dynprop.estimator import model as em
+from dynprop.estimator.ekf import EkfInputs, initial_state
+from dynprop.estimator.preprocess import wheel_torque, yaw_momentum
+
+from ..config import build
+from ..config.schema import Scenario
+from ..units import DEG
+from .inputs import filter_inputs, initial_prior, join_padded
+
+
+def ekf_design(s: Scenario) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """(model parameters, ω_n, X0, P0) of the EKF for ``s``: the nominal full inertia
+    (products included), the orbit rate, the sample interval and the scenario's
+    process noise, with pitch's torque noise taken as roll's (the paper has no pitch
+    state); the prior is the paper filter's, pitch getting roll's σ."""
+    params, noise = build.estimator_model(s)
+    J = build.build_spacecraft(s).J
+    q = {"q_x": noise.q_x, "q_y": noise.q_x, "q_z": noise.q_z, "q_w": noise.q_w,
+         "q_px": noise.q_px, "q_pz": noise.q_pz, "q_cx": noise.q_cx, "q_cz": noise.q_cz}
+    pm = m.pack_params(J, params.omega0_radps, s.sample_interval_s, q)
+    x0, P0 = initial_prior(s, params)
+    i = s.estimator.initial_sigma
+    X0, P0e = initial_state(x0, P0, i.roll_deg * DEG, i.roll_rate_degps * DEG,
+                            params.omega_n_radps)
+    return pm, params.omega_n_radps, X0, P0e
+
+
+def ekf_inputs(s: Scenario, params: em.ModelParams, roll, pitch, yaw, speeds,
+               yaw_sigma=None, sun_head=None, known_Nm=None) -> EkfInputs:
+    """Telemetry arrays (SI) to the EKF's measurements and inputs."""
+    meas, u, _ = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm)
+    H = params.H_Nms
+    Nx, Nz, Nw = em.input_torques(params, u)
+    Hm = yaw_momentum(speeds, build.build_spacecraft(s).momentum_factors(1))
+    Hm = np.where(np.isfinite(Hm), Hm, H)
+    Hdot = wheel_torque(Hm, s.sample_interval_s, s.estimator.wheel_torque_window_s)
+    z = np.column_stack([meas.roll_rad, pitch, meas.yaw_rad, meas.h_Nms])
+    r = meas.r()
+    r = np.column_stack([r[:, 0], r[:, 0], r[:, 1], r[:, 2]])
+    return EkfInputs(z, r, np.column_stack([Hm, Hdot, Nw, Nx, Nz]))
+
+
+def padded_ekf_inputs(s: Scenario, params: em.ModelParams, prev_tail: tuple | None,
+                      cur: tuple, nxt: tuple | None, pad: int) -> EkfInputs:
+    """``ekf_inputs`` of a window from its telemetry (``records.Measured`` plus the
+    pitch, as one tuple) padded with ``pad`` samples of each neighbour
+    (``inputs.join_padded``), so the derivatives N_w* and Ḣ equal the whole run's."""
+    joined, sl = join_padded(prev_tail, cur, nxt, pad)
+    roll, yaw, speeds, sigma, head, pitch = joined
+    full = ekf_inputs(s, params, roll, pitch, yaw, speeds, sigma, head)
+    return EkfInputs(full.z[sl], full.r[sl], full.u[sl])

@@ -1,0 +1,40 @@
+"""The work behind the commands that write a run directory, shared by the command
+line (``cli``) and the Python API (``dynprop.api``), so the two cannot drift apart.
+
+This is the top room: it alone wires the run engine (``run``) to the analyses
+that plug into it (the trim loop of ``trim``, a Monte Carlo case of
+``montecarlo``), which ``run`` itself never imports.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .config.schema import Scenario
+from .files.simulation import write_simulation
+from .run.simulate import Simulation, simulate
+from .run.streamrun import stream_to_directory
+
+
+def simulate_to_directory(s: Scenario, stage: Path) -> Simulation:
+    """`dynprop simulate`: truth and telemetry of ``s`` into ``stage``."""
+    sim = simulate(s)
+    write_simulation(stage, sim)
+    return sim
+
+
+def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = None) -> dict:
+    """Everything of one `dynprop run` into ``stage``; returns the summary.
+
+    A plain run streams in windows (``run.streamrun``), steered by the trim loop when
+    the scenario closes it (``trim.every_days``).  With ``montecarlo_case`` K the
+    spacecraft that flies is case K of the scenario's dispersions, every sample kept
+    (``montecarlo.case_dir``)."""
+    if montecarlo_case is not None:
+        from .montecarlo.case_dir import case_to_directory
+        return case_to_directory(s, stage, montecarlo_case)
+    steering = None
+    if s.trim.every_days is not None:
+        from .trim.loop import TrimSteering
+        steering = TrimSteering(s)
+    return stream_to_directory(s, stage, steering=steering)

@@ -1,0 +1,35 @@
+"""One line per problem, and the valid name a misspelt one most likely meant: how
+every bad input (a scenario key, a telemetry column, an argument) is reported."""
+
+from __future__ import annotations
+
+import difflib
+
+MAX_PROBLEM_LINES = 10
+
+
+def closest(word: str, candidates) -> str | None:
+    """The valid name a misspelt ``word`` most likely meant, if any is close.
+
+    difflib's ratio catches transpositions and small slips (``nmae`` → ``name``);
+    a key written without its unit suffix (``inertia`` → ``inertia_kgm2``) is
+    caught by its prefix even where the ratio is low."""
+    candidates = [str(c) for c in candidates]
+    match = difflib.get_close_matches(str(word), candidates, n=1, cutoff=0.6)
+    if match:
+        return match[0]
+    prefixed = [c for c in candidates if c.startswith(f"{word}_")]
+    return prefixed[0] if len(prefixed) == 1 else None
+
+
+def did_you_mean(word: str, candidates) -> str:
+    match = closest(word, candidates)
+    return f"; did you mean '{match}'?" if match else ""
+
+
+def cap_lines(lines: list[str], limit: int = MAX_PROBLEM_LINES) -> list[str]:
+    """At most ``limit`` lines; the last says how many more were found."""
+    if len(lines) <= limit:
+        return lines
+    more = len(lines) - (limit - 1)
+    return lines[:limit - 1] + [f"... and {more} more problems"]

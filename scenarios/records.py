@@ -1,0 +1,104 @@
+"""The typed records that pass between rooms: a window of a streamed run, from the
+producer's truth and telemetry to what the filters leave of it.
+
+``dynprop run`` streams (``run.stream``): the producer process hands the consumer a
+``TruthWindow`` as soon as a window's truth and telemetry exist and a ``TwinWindow``
+once the linear twin and its filter are through it; the consumer's stages filter
+and smooth the truth window and join the two into a ``Window``, which the tallies
+(``run.tally``) and the writers (``files.decimate``, estimate.csv) read.  Every
+array is in SI and in the filter's model coordinates unless its name says
+otherwise; sample indices are global (from the run's first sample).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Measured(NamedTuple):
+    """Telemetry in SI as the filter reads it (``bridge.inputs.telemetry_inputs``):
+    Earth-sensor roll, ground yaw (NaN where none), wheel speeds (N, n), the yaw's
+    a-priori 1σ (or None) and the Sun head it came from (NaN where none, or None)."""
+
+    roll_rad: np.ndarray
+    yaw_rad: np.ndarray
+    speeds_radps: np.ndarray
+    yaw_sigma_rad: np.ndarray | None
+    sun_head: np.ndarray | None
+
+    def cut(self, rows: slice) -> Measured:
+        """The same telemetry on ``rows`` only (None stays None)."""
+        return Measured(*(None if v is None else v[rows] for v in self))
+
+
+@dataclass(frozen=True)
+class FilterHistory:
+    """What the summary, the figures and the files need of a filter's run over a
+    window, once its covariance history is no longer needed: the estimate, 1σ,
+    innovations and their variances (model coordinates), the backend that ran it,
+    and for a filter beside the paper's the packed covariance on the NEES samples."""
+
+    x: np.ndarray
+    sigma: np.ndarray | None
+    innovations: np.ndarray
+    innovation_var: np.ndarray
+    backend: str
+    P_nees: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class TruthWindow:
+    """A window's truth and telemetry, as the producer hands it on: samples
+    [start, stop) at times ``t_s``, the telemetry the filter reads (``measured``;
+    the Earth sensor's pitch for the EKF, else None), telemetry.csv's columns at
+    the output rows, the truth in the model's states, the shadow factor and the
+    true 3-1-2 angles (yaw, roll, pitch) at the output rows."""
+
+    index: int
+    start: int
+    stop: int
+    t_s: np.ndarray
+    measured: Measured
+    pitch_rad: np.ndarray | None
+    tel_rows: dict[str, np.ndarray]
+    truth_model: np.ndarray
+    shadow: np.ndarray
+    euler_rows: np.ndarray
+
+
+@dataclass(frozen=True)
+class TwinWindow:
+    """The linear twin over a window: its states (model coordinates), its filter's
+    history and that filter's NEES on the window's NEES samples."""
+
+    index: int
+    twin_model: np.ndarray
+    linear: FilterHistory
+    nees_linear: np.ndarray
+
+
+@dataclass(frozen=True)
+class Window(TruthWindow):
+    """A window once everything is through it: the truth window, the paper's filter
+    on the real telemetry (``real``, with its NEES on the NEES samples), its RTS
+    smoothed estimate (None when not smoothed), the filters beside the paper's by
+    name (``estimator.filters``), and the linear twin with its filter."""
+
+    params: object                        # estimator.model.ModelParams of the filter
+    real: FilterHistory
+    nees_real: np.ndarray
+    smoothed_x: np.ndarray | None
+    filters: dict[str, FilterHistory]
+    twin_model: np.ndarray
+    linear: FilterHistory
+    nees_linear: np.ndarray
+
+    @classmethod
+    def join(cls, truth: TruthWindow, twin: TwinWindow, **estimates) -> Window:
+        """The truth window with its estimates and its twin."""
+        own = {f.name: getattr(truth, f.name) for f in fields(TruthWindow)}
+        return cls(**own, twin_model=twin.twin_model, linear=twin.linear,
+                   nees_linear=twin.nees_linear, **estimates)

@@ -1,0 +1,128 @@
+"""The consumer's stages of a streamed run (``stream.windows_of`` chains them): the
+paper's filter on each truth window and the RTS smoother over it.
+
+Each stage is a generator over window records: it yields the ``Plan`` first, then
+one record per window, and looks one window ahead where the padding or the
+smoother's overlap needs the next window's first samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from dynprop.estimator.consistency import nees
+from dynprop.estimator.ekf import EkfResult
+from dynprop.estimator.kalman import (
+    ExtraNoise,
+    FilterResult,
+    kalman_filter,
+    rts_smoother,
+    unpack,
+)
+from dynprop.estimator.transition import discretize
+
+from ..bridge.inputs import initial_prior, padded_filter_inputs
+from ..config import build
+from ..config.schema import Scenario
+from ..records import FilterHistory, TruthWindow
+from ..samples import nees_rows
+from .ekf import EkfStream
+
+
+@dataclass(frozen=True)
+class Filtered:
+    """A truth window through the paper's filter (and the EKF beside it when the
+    scenario asks), with the inputs its smoother needs."""
+
+    window: TruthWindow
+    real: FilterResult
+    u: np.ndarray
+    extra: ExtraNoise | None
+    ekf: EkfResult | None
+
+
+def filtered(s: Scenario, records):
+    """The paper's filter on each truth window, continuing from the prior the
+    previous window ended with.  The twin is filtered in the producer
+    (``twin_filter.TwinFilter``)."""
+    plan = next(records)
+    yield plan
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, s.sample_interval_s)
+    prior = initial_prior(s, params)
+    ekf = EkfStream(s, params) if "ekf" in s.estimator.filters else None
+    prev_tail, cur = None, next(records, None)
+    while cur is not None:
+        # The last window needs no look-ahead (and waiting for the stream's end would
+        # hold it up until the producer is done with its files).
+        nxt = None if plan.is_last(cur.index) else next(records, None)
+        meas, u, extra = padded_filter_inputs(s, params, prev_tail, cur.measured,
+                                              None if nxt is None else nxt.measured, plan.pad)
+        result = kalman_filter(meas, disc, *prior, u=u, extra=extra)
+        prior = (result.x_next, result.P_next)
+        e = None if ekf is None else ekf.window(cur, nxt, plan.pad)
+        # The next window's derivative needs only the last samples of this one.
+        prev_tail = cur.measured.cut(slice(-plan.pad, None))
+        yield Filtered(cur, result, u, extra, e)
+        cur = nxt
+
+
+def _head(a: FilterResult, n: int) -> FilterResult:
+    return FilterResult(a.x[:n], a.P_packed[:n], a.innovations[:n], a.innovation_var[:n],
+                        a.x_next, a.P_next, a.backend)
+
+
+@dataclass(frozen=True)
+class Smoothed:
+    """What the summary and files need of a filtered window once it is smoothed:
+    the filters' estimates, σ and innovations and the real filter's NEES on the NEES
+    samples (formed here, before the window's twin record comes, which the consumer
+    would otherwise wait for idle), not the covariance history."""
+
+    window: TruthWindow
+    real: FilterHistory
+    nees_real: np.ndarray
+    smoothed_x: np.ndarray | None
+    filters: dict[str, FilterHistory]
+
+
+def _lighten(f: Filtered, smoothed_x: np.ndarray | None, params) -> Smoothed:
+    w, real = f.window, f.real
+    k = nees_rows(w.start, w.start + len(w.t_s)) - w.start
+    filters = {}
+    if f.ekf is not None:
+        e = f.ekf
+        filters["ekf"] = FilterHistory(e.x, e.sigma, e.innovations, e.innovation_var,
+                                       e.backend, P_nees=e.P_packed[k])
+    return Smoothed(w, FilterHistory(real.x, real.sigma, real.innovations, real.innovation_var,
+                                     real.backend),
+                    nees(real.x[k], unpack(real.P_packed[k]), w.truth_model[k]), smoothed_x,
+                    filters)
+
+
+def smoothed(s: Scenario, records, smooth: bool = True):
+    """The RTS smoother over each window and ``plan.overlap`` samples of the next
+    (one window: the whole run, exactly ``rts_smoother``)."""
+    plan = next(records)
+    yield plan
+    params, noise = build.estimator_model(s)
+    disc = discretize(params, noise, s.sample_interval_s)
+    cur = next(records, None)
+    while cur is not None:
+        nxt = None if plan.is_last(cur.window.index) else next(records, None)
+        x = None
+        if smooth:
+            x_after = None
+            if nxt is not None:
+                # The overlap first, from its filtered end; then this window from the
+                # smoothed state where the overlap begins (no joined copy of the two).
+                m = min(plan.overlap, len(nxt.window.t_s))
+                x_after = rts_smoother(
+                    _head(nxt.real, m), disc, u=nxt.u[:m], covariance=False,
+                    extra=None if nxt.extra is None else ExtraNoise(nxt.extra.scale[:m],
+                                                                    nxt.extra.Qd_unit)).x[0]
+            x = rts_smoother(cur.real, disc, u=cur.u, extra=cur.extra, covariance=False,
+                             x_after=x_after).x
+        yield _lighten(cur, x, params)
+        cur = nxt

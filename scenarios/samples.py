@@ -1,0 +1,34 @@
+"""Which samples of a run each output keeps, counted on the global sample index.
+
+A run is samples 0 … N−1 at ``sample_interval_s``.  Its output rows are every
+``stride``-th sample (``output.interval_s``), its NEES is formed on every
+``NEES_STRIDE``-th, and its Sun gaps are yaw outages of a minimum length.  Every
+room that writes, reduces or draws a run asks here, so the whole-array run, the
+streamed windows and the figures agree on the very same samples.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+NEES_STRIDE = 10  # NEES on every 10th sample (5 s apart): plenty for means and figures
+
+
+def output_rows(start: int, stop: int, stride: int) -> np.ndarray:
+    """Global sample indices of the output rows (multiples of ``stride``) within
+    [start, stop)."""
+    return np.arange(-(-start // stride) * stride, stop, stride)
+
+
+def nees_rows(start: int, stop: int) -> np.ndarray:
+    """Global sample indices within [start, stop) on which the NEES is formed."""
+    return output_rows(start, stop, NEES_STRIDE)
+
+
+def sun_gaps(yaw_present: np.ndarray, dt_s: float, min_hours: float) -> list[tuple[int, int]]:
+    """(first missing, first present again) index pairs of yaw outages ≥ ``min_hours``;
+    a gap still open at the end of the run has end = N."""
+    missing = ~np.asarray(yaw_present, dtype=bool)
+    edges = np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
+    pairs = list(zip(edges[::2], edges[1::2], strict=True))
+    return [(a, b) for a, b in pairs if (b - a) * dt_s >= min_hours * 3600]
