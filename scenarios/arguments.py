@@ -28,6 +28,17 @@ def _out_args(p: argparse.ArgumentParser, help: str, required: bool = True,
     p.add_argument("--force", action="store_true", help=force)
 
 
+def _scenario_command(sub, name: str, help: str, out: str | None = None,
+                      **out_kw) -> argparse.ArgumentParser:
+    """A command on a scenario (``--seed``, ``--set``, ...), with ``--out``/``--force``
+    when it writes a directory (``out``: its help)."""
+    p = sub.add_parser(name, help=help)
+    _scenario_args(p)
+    if out is not None:
+        _out_args(p, out, **out_kw)
+    return p
+
+
 def _whole(text: str, minimum: int) -> int:
     try:
         value = int(text)
@@ -58,20 +69,16 @@ def build_parser() -> argparse.ArgumentParser:
                     "spacecraft (GOES-Next): nonlinear truth vs the paper's linear filter.")
     parser.add_argument("--version", action="version", version=f"dynprop {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    sim = sub.add_parser("simulate", help="truth + telemetry: scenario.yaml, truth.csv, "
-                         "telemetry.csv")
-    _scenario_args(sim)
-    _out_args(sim, "new run directory")
-    run = sub.add_parser("run", help="truth, telemetry, the filter on it and on the linear "
-                         "twin; errors, summary and figures")
-    _scenario_args(run)
-    _out_args(run, "new run directory (default runs/NAME-TIME)", required=False)
+    _scenario_command(sub, "simulate", "truth + telemetry: scenario.yaml, truth.csv, "
+                      "telemetry.csv", "new run directory")
+    run = _scenario_command(sub, "run", "truth, telemetry, the filter on it and on the "
+                            "linear twin; errors, summary and figures",
+                            "new run directory (default runs/NAME-TIME)", required=False)
     run.add_argument("--montecarlo-case", type=_case_number, metavar="K",
                      help="fly Monte Carlo case K of the scenario's dispersions (the filter "
                      "stays nominal), reproducing `dynprop montecarlo`'s case K bit for bit")
-    mc = sub.add_parser("montecarlo", help="dispersed Monte Carlo set: ensemble errors, "
-                        "averaged NEES, yaw at the Sun-gap end; resumable")
-    _scenario_args(mc)
+    mc = _scenario_command(sub, "montecarlo", "dispersed Monte Carlo set: ensemble errors, "
+                           "averaged NEES, yaw at the Sun-gap end; resumable")
     mc.add_argument("--runs", required=True, type=_positive_int, metavar="N",
                     help="number of cases (0 … N−1)")
     mc.add_argument("--workers", type=_positive_int, metavar="K",
@@ -92,14 +99,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="a truth.csv: also compute the errors, NEES and run's summary")
     _out_args(est, "new output directory")
     sub.add_parser("scenarios", help="list the bundled scenarios")
-    obs = sub.add_parser("observability", help="rank tables of the paper's Section 4")
-    _scenario_args(obs)
-    cov = sub.add_parser("covariance", help="steady-state yaw accuracy of Section 6")
-    _scenario_args(cov)
-    lin = sub.add_parser("linearization", help="linearization-validation report: Jacobian vs "
-                         "the paper, nonlinear vs linear propagation, error budget")
-    _scenario_args(lin)
-    _out_args(lin, "new report directory")
+    _scenario_command(sub, "observability", "rank tables of the paper's Section 4")
+    _scenario_command(sub, "covariance", "steady-state yaw accuracy of Section 6")
+    _scenario_command(sub, "linearization", "linearization-validation report: Jacobian vs "
+                      "the paper, nonlinear vs linear propagation, error budget",
+                      "new report directory")
     trim = sub.add_parser("trim", help="solar trim-tab setting from the estimated torque: "
                           "κ ± σ and the tab move (RUN_DIR/trim/); --verify flies it")
     trim.add_argument("run_dir", type=Path, metavar="RUN_DIR",

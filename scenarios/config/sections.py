@@ -103,8 +103,7 @@ class GravityGradient(_Section):
 
 
 class Solar(_Section):
-    enabled: bool = Field(True, description="solar array/sail imbalance torque, zero in "
-                          "eclipse")
+    enabled: bool = Field(True, description="solar array/sail imbalance torque, zero in eclipse")
     untrimmed_torque_Nm: float = Field(_SOLAR.untrimmed_torque_Nm,
                                        description="imbalance κ with the tab at 0 (N m)")
     tab_effectiveness_Nm_per_deg: float = Field(_SOLAR.tab_effectiveness_Nm_per_deg,
