@@ -114,6 +114,29 @@ def test_every_summary_and_case_key_is_documented(written):
                 assert not undocumented(sorted(keys), spans), f"{d.name}/{name}"
 
 
+def test_every_summary_has_the_run_summarys_keys(written):
+    """One key set for every summary.json (docs/outputs.md): a Monte Carlo case's and
+    `estimate`'s have every key of `run`'s, the output keys (output_interval_s,
+    telemetry_written, daily) included, and add only their own."""
+    def keys(name):
+        return set(json.loads((written[name] / "summary.json").read_text()))
+    run = keys("run")
+    assert {"output_interval_s", "telemetry_written", "daily"} <= run
+    assert keys("case") - run == {"montecarlo_case", "dispersed"}
+    assert run <= keys("case")
+    assert keys("estimate") - run == {"telemetry"} and run <= keys("estimate")
+    case = json.loads((written["case"] / "summary.json").read_text())
+    # Every sample kept, telemetry.csv written, no daily.csv: what the case directory holds.
+    assert case["output_interval_s"] == case_sample_interval(written["case"])
+    assert case["telemetry_written"] is True and (written["case"] / "telemetry.csv").is_file()
+    assert case["daily"] is None and not (written["case"] / "daily.csv").exists()
+
+
+def case_sample_interval(d: Path) -> float:
+    import yaml
+    return yaml.safe_load((d / "scenario.yaml").read_text())["sample_interval_s"]
+
+
 def test_every_comparison_key_is_documented(written):
     spans = _spans()
     for d in (written["run"], written["estimate"]):
