@@ -16,6 +16,7 @@ from dataclasses import dataclass, fields
 from typing import NamedTuple
 
 import numpy as np
+from dynprop.estimator.model import ModelParams
 
 
 class Measured(NamedTuple):
@@ -87,7 +88,7 @@ class Window(TruthWindow):
     smoothed estimate (None when not smoothed), the filters beside the paper's by
     name (``estimator.filters``), and the linear twin with its filter."""
 
-    params: object                        # estimator.model.ModelParams of the filter
+    params: ModelParams                   # the paper filter's model
     real: FilterHistory
     nees_real: np.ndarray
     smoothed_x: np.ndarray | None

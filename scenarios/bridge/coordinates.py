@@ -54,16 +54,20 @@ def truth_torques(truth, model_torques, omega0_radps: float) -> TruthTorques:
     return TruthTorques(euler312_rates(truth.euler_rad, truth.w_br_radps), states, res_x, res_z)
 
 
+def _attitude_columns(truth, rates: np.ndarray, omega_n: float, rows) -> list[np.ndarray]:
+    return [truth.roll_rad[rows], rates[rows, 1] / omega_n, truth.yaw_rad[rows],
+            rates[rows, 0] / omega_n, truth.h_Nms[rows]]
+
+
 def model_attitude(truth, rates: np.ndarray, omega_n: float, rows=slice(None)) -> np.ndarray:
     """The truth as [r, ṙ/ω_n, y, ẏ/ω_n, h] (N, 5) from its Euler ``rates``, or only
     the samples ``rows``."""
-    return np.column_stack([truth.roll_rad[rows], rates[rows, 1] / omega_n, truth.yaw_rad[rows],
-                            rates[rows, 0] / omega_n, truth.h_Nms[rows]])
+    return np.column_stack(_attitude_columns(truth, rates, omega_n, rows))
 
 
 def model_truth(params: em.ModelParams, truth, tt: TruthTorques, rows=slice(None)
                 ) -> np.ndarray:
     """The nonlinear truth in the coordinates of the model ``params``: (N, 9), or
     only the samples ``rows``."""
-    return np.column_stack([model_attitude(truth, tt.rates, params.omega_n_radps, rows),
+    return np.column_stack([*_attitude_columns(truth, tt.rates, params.omega_n_radps, rows),
                             tt.torque_states[rows]])
