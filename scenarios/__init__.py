@@ -11,10 +11,4 @@ the base modules ``units``, ``samples``, ``records`` and ``workers``; ``config``
 modules and the rooms below it.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    # pyproject.toml holds the version; the installed metadata carries it here.
-    __version__ = version("dynprop")
-except PackageNotFoundError:   # a source tree that was never installed
-    __version__ = "0+unknown"
+__version__ = "0.1.0"   # the package's one version (pyproject.toml reads it here)

@@ -87,7 +87,7 @@ class Smoothed:
     filters: dict[str, FilterHistory]
 
 
-def _lighten(f: Filtered, smoothed_x: np.ndarray | None, params) -> Smoothed:
+def _lighten(f: Filtered, smoothed_x: np.ndarray | None) -> Smoothed:
     w, real = f.window, f.real
     k = nees_rows(w.start, w.start + len(w.t_s)) - w.start
     filters = {}
@@ -124,5 +124,5 @@ def smoothed(s: Scenario, records, smooth: bool = True):
                                                                     nxt.extra.Qd_unit)).x[0]
             x = rts_smoother(cur.real, disc, u=cur.u, extra=cur.extra, covariance=False,
                              x_after=x_after).x
-        yield _lighten(cur, x, params)
+        yield _lighten(cur, x)
         cur = nxt
