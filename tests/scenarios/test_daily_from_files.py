@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import math
 from datetime import datetime, timedelta
 from pathlib import Path
 
@@ -37,6 +36,9 @@ import yaml
 import dynprop
 from scenarios.cli import main
 from scenarios.files.csvio import read_csv
+
+from .test_cli_run import eq55_sigma_deg
+from .test_sun_gaps import brute_force_gaps
 
 DT = 0.512
 N_DAY = 168_750            # samples per day: 86400 s / 0.512 s, exactly
@@ -97,29 +99,11 @@ def decimated3():
 # ------------------------------------------------------------------ helpers
 
 
-def eq55_sigma_deg(resolved: dict) -> float:
-    """σ_yaw ≈ √(q/(ω0 H²)) (Eq. 55) from the resolved scenario, computed here."""
-    pn = resolved["estimator"]["process_noise"]
-    q = 0.5 * (pn["q_x"] + pn["q_z"])
-    w = resolved["spacecraft"]["wheels"]
-    H = -w["spin_inertia_kgm2"] * 2 * w["speed_rpm"] * math.pi / 30 \
-        * math.cos(math.radians(w["cant_deg"]))
-    omega0 = math.sqrt(3.986004418e14 / resolved["orbit"]["radius_m"] ** 3)
-    return math.degrees(math.sqrt(q / (omega0 * H**2)))
-
-
 def yaw_gaps(present: np.ndarray, min_h: float) -> list[tuple[int, int]]:
     """(first sample without yaw, first sample with yaw again) of every outage of at
-    least ``min_h`` that ends inside the run, by walking the mask."""
-    gaps, start = [], None
-    for i, p in enumerate(present.tolist()):
-        if not p and start is None:
-            start = i
-        elif p and start is not None:
-            if (i - start) * DT >= min_h * 3600:
-                gaps.append((start, i))
-            start = None
-    return gaps
+    least ``min_h`` that ends inside the run (``test_sun_gaps``'s one-sample-at-a-time
+    definition)."""
+    return [(a, b) for a, b in brute_force_gaps(present, DT, min_h) if b < len(present)]
 
 
 def rms_with_bound(e: np.ndarray, bound: np.ndarray) -> tuple[float, float]:
