@@ -27,8 +27,6 @@ from ..samples import output_rows
 from .columns import display_factors
 from .comparison import DIFF_STATES, ComparisonInputs, comparison_arrays
 
-ENVELOPED = ("err_real", "err_linear", "err_real_minus_linear", "err_smoothed",
-             "nees_real", "nees_linear")
 DIFF_COLS = list(DIFF_STATES)
 
 

@@ -13,11 +13,6 @@ from dynprop.estimator.model import H_WHEEL, R, Y
 from ..records import Window
 from ..units import DAY_S, RAD2DEG
 
-DAILY_COLUMNS = ("day", "day_of_year", "sun_gap_start_h", "sun_gap_end_h", "sun_gap_length_h",
-                 "gap_end_yaw_error_deg", "gap_end_yaw_sigma_deg", "eq55_sigma_yaw_deg",
-                 "eclipse_min", "roll_error_rms_deg", "yaw_error_rms_deg", "h_error_rms_Nms",
-                 "nees_mean", "yaw_error_rms_linear_deg", "yaw_error_rms_real_minus_linear_deg")
-
 
 class DailyTally:
     """One row of daily.csv per simulated day (day k: t in [k, k+1) days)."""
