@@ -12,12 +12,18 @@ import numpy as np
 
 from .step import split_aux
 
-# TruthResult.torques's sources, in truth.csv's column order.
+# TruthResult.torques's sources, in truth.csv's column order.  Those of
+# OPTIONAL_TORQUES are there only in runs that fly them: the disturbance
+# (``sim.disturbance``) only when a scenario has one, so a run without it records and
+# writes what it always did.
 TORQUE_SOURCES = ("gravity_gradient", "solar", "magnetic", "magnetic_control", "wheel_control",
-                  "wheel_input", "wheel_ripple", "external")
+                  "wheel_input", "wheel_ripple", "external", "disturbance")
+OPTIONAL_TORQUES = ("disturbance",)
 # The sources acting on the spacecraft from outside, besides the gravity gradient
-# (which the paper's linear model carries in F): the torques its Eq. 9 models.
-EXTERNAL_TORQUES = ("solar", "magnetic", "magnetic_control", "external")
+# (which the paper's linear model carries in F): the torques its Eq. 9 stands for
+# (the disturbance too, which the model meets only as process noise), summed in
+# this order.
+EXTERNAL_TORQUES = ("solar", "magnetic", "magnetic_control", "external", "disturbance")
 
 class Euler312:
     """yaw, roll and pitch (rad) of a history holding ``euler_rad`` (N, 3): the 3-1-2
@@ -45,8 +51,10 @@ class TruthResult(Euler312):
     ``torques`` maps a source name to an (N, 3) body torque in N m:
     gravity_gradient, solar, magnetic (residual and prescribed dipoles),
     magnetic_control (the torquers), wheel_control (the reaction of the control's
-    motor torques on the body), wheel_input (of ``wheel_torque``), wheel_ripple
-    and external.  Torques are evaluated at each sample, the start of its step.
+    motor torques on the body), wheel_input (of ``wheel_torque``), wheel_ripple,
+    external (the caller's ``extra_torque``) and, in runs that fly one, disturbance
+    (``sim.disturbance``).  Torques are evaluated at each sample, the start of its
+    step; external and disturbance are held over it.
     """
 
     t_s: np.ndarray
@@ -107,6 +115,10 @@ class Torques(Mapping):
     def __len__(self) -> int:
         return len(self._order)
 
+    def __contains__(self, name) -> bool:
+        # Without this, Mapping's would form a reaction just to answer.
+        return name in self._order
+
     def slice(self, lo: int, hi: int) -> Torques:
         """Samples lo … hi−1, still formed only when read."""
         cut = slice(lo, hi)
@@ -139,11 +151,16 @@ def truth_result(t_s, states, aux, inputs, shadow, spacecraft, backend) -> Truth
     a = split_aux(aux, n)
     x = states[:-1]
     axes = spacecraft.wheel_axes
-    torques = Torques(
-        {"gravity_gradient": a["t_gg"], "solar": a["t_solar"], "magnetic": a["t_mag"],
-         "magnetic_control": a["t_mtq"], "external": inputs["n_ext"]},
-        {"wheel_control": a["u_cmd"], "wheel_input": inputs["u_wheel"],
-         "wheel_ripple": inputs["ripple"]}, axes, TORQUE_SOURCES)
+    # With a disturbance the step's n_ext is the caller's torque plus it, each kept
+    # apart (``TruthStream._window_inputs``); without one n_ext is the caller's alone.
+    ready = {"gravity_gradient": a["t_gg"], "solar": a["t_solar"], "magnetic": a["t_mag"],
+             "magnetic_control": a["t_mtq"], "external": inputs.get("external", inputs["n_ext"])}
+    if "disturbance" in inputs:
+        ready["disturbance"] = inputs["disturbance"]
+    reactions = {"wheel_control": a["u_cmd"], "wheel_input": inputs["u_wheel"],
+                 "wheel_ripple": inputs["ripple"]}
+    order = tuple(k for k in TORQUE_SOURCES if k in ready or k in reactions)
+    torques = Torques(ready, reactions, axes, order)
     return TruthResult(
         t_s=t_s, q_br=x[:, 0:4], w_bn_radps=x[:, 4:7], w_br_radps=a["w_br"],
         wheel_speeds_radps=x[:, 7:], h_Nms=a["h"], H_Nms=a["H"], torques=torques,

@@ -2,10 +2,11 @@
 
 ``TruthStream`` is what every run flies: a window at a time, it evaluates the
 slowly varying inputs (Sun, shadow, field: ``sun_inputs``) on the window's grid
-with vectorised numpy, draws the wheel ripple from the caller's generator, and rolls
-the compiled step out (``rollout``: a C loop over the step, or ``mapaccum`` chunks in
-the VM), one Python call per piece of thousands of steps, none per step, carrying
-its state and generators to the next window.  ``simulate_truth`` rolls a whole run
+with vectorised numpy, draws the wheel ripple from the caller's generator (and a
+disturbance torque, ``disturbance``, from its own), and rolls the compiled step out
+(``rollout``: a C loop over the step, or ``mapaccum`` chunks in the VM), one Python
+call per piece of thousands of steps, none per step, carrying its state and
+generators to the next window.  ``simulate_truth`` rolls a whole run
 out at once (the tests and benchmarks).  The result is ``history.TruthResult``.
 """
 
@@ -24,6 +25,7 @@ from dynprop.rollout.compiled import requested_backend
 
 from . import ephemeris
 from .control import Control
+from .disturbance import Disturbance, DisturbanceDraw
 from .environment import Environment
 from .frames import GeoOrbit, dcm_from_quat, quat_from_euler312
 from .history import TruthResult, truth_result
@@ -102,18 +104,21 @@ class TruthStream:
     ``window(a, b)`` gives samples a … b−1 for contiguous, increasing windows (the
     first from 0).  Concatenated, the windows equal ``simulate_truth``'s whole-run
     arrays bit for bit, which is what ``simulate_truth`` is: one window.  Carried
-    from window to window: the RK4 state and the ripple generator (whose draws
-    continue the one stream).  Aligned on the run: the Sun's ephemeris nodes (every
-    128 samples from the start, unwrapped over the run) and the shadow's coarse
-    pass (every 64 samples from the start, its padding from the run's first
-    interval).  Everything else is per sample.  Memory is the window's, whatever
-    the run's length (the run's Sun nodes: 32 bytes per 128 samples)."""
+    from window to window: the RK4 state, the ripple generator (whose draws
+    continue the one stream) and the disturbance's generator and Gauss–Markov state
+    (``disturbance.DisturbanceDraw``).  Aligned on the run: the Sun's ephemeris
+    nodes (every 128 samples from the start, unwrapped over the run) and the
+    shadow's coarse pass (every 64 samples from the start, its padding from the
+    run's first interval).  Everything else is per sample.  Memory is the window's,
+    whatever the run's length (the run's Sun nodes: 32 bytes per 128 samples)."""
 
     def __init__(self, spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environment,
                  control: Control, initial: InitialState, epoch: datetime, duration_s: float,
                  dt_s: float = 0.512, rng: np.random.Generator | None = None,
                  extra_torque: np.ndarray | None = None,
-                 wheel_torque: np.ndarray | None = None, model: TruthModel | None = None):
+                 wheel_torque: np.ndarray | None = None, model: TruthModel | None = None,
+                 disturbance: Disturbance | None = None,
+                 disturbance_rng: np.random.Generator | None = None):
         if not (np.isfinite(duration_s) and duration_s >= 0):
             raise ValueError("duration_s must be finite and non-negative")
         if not (np.isfinite(dt_s) and dt_s > 0):
@@ -130,6 +135,11 @@ class TruthStream:
             _checked(extra_torque, (n, 3), "extra torque")
         self.wheel_torque = None if wheel_torque is None else \
             _checked(wheel_torque, (n, nw), "wheel torque")
+        self.disturbance_draw = None
+        if disturbance is not None and disturbance.enabled:
+            if disturbance_rng is None:
+                raise ValueError("a disturbance_rng is required when a disturbance is flown")
+            self.disturbance_draw = DisturbanceDraw(disturbance, dt_s, disturbance_rng)
         self.p = pack_params(spacecraft, orbit, environment, control, dt_s)
         self.model = model or truth_model(nw, DEFAULT_CHUNK, requested_backend())
         self.x = initial.state_vector(spacecraft, orbit)
@@ -172,33 +182,49 @@ class TruthStream:
 
     def _window_inputs(self, a: int, b: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
         """Arrays of samples a … b−1 for the step inputs and the shadow: what is known
-        without computing set (zeros, the caller's torques), the rest for ``_fill``."""
+        without computing set (zeros, the caller's torques), the rest for ``_fill``.
+        With a disturbance, ``external`` (the caller's torque) and ``disturbance`` are
+        kept beside the step's ``n_ext``, their sum, so that the two are recorded
+        apart (``history.truth_result``); without one, ``n_ext`` is the caller's."""
         n, nw = b - a, self.spacecraft.n_wheels
+        external = np.zeros((n, 3)) if self.extra_torque is None else self.extra_torque[a:b]
         inputs = {"sun_r": np.empty((n, 3)), "sun_scale": np.empty(n),
                   "m_prof": np.empty((n, 3)) if profiled(self.environment)
                   else np.zeros((n, 3)),
-                  "n_ext": np.zeros((n, 3)) if self.extra_torque is None
-                  else self.extra_torque[a:b],
+                  "n_ext": external,
                   "u_wheel": np.zeros((n, nw)) if self.wheel_torque is None
                   else self.wheel_torque[a:b],
                   "ripple": np.empty((n, nw)) if self.sigma > 0 else np.zeros((n, nw))}
+        if self.disturbance_draw is not None:
+            inputs["external"], inputs["disturbance"] = external, np.empty((n, 3))
+            # The step's n_ext: the disturbance itself, or the caller's torque plus it.
+            inputs["n_ext"] = inputs["disturbance"] if self.extra_torque is None \
+                else np.empty((n, 3))
         return inputs, np.empty(n)
 
     def _fill(self, a: int, lo: int, hi: int, t_s: np.ndarray, inputs: dict[str, np.ndarray],
-              shadow: np.ndarray, ripple: bool = True) -> None:
+              shadow: np.ndarray, draw: bool = True) -> None:
         """Fill rows lo … hi−1 of ``_window_inputs``' arrays (samples a+lo … a+hi−1 of
-        the run; ``t_s`` their times), and with ``ripple`` draw their ripple: pieces
-        drawn in order continue the generator's one stream as a whole draw would."""
+        the run; ``t_s`` their times), and with ``draw`` draw their ripple and
+        disturbance: pieces drawn in order continue each generator's one stream (and
+        the disturbance's carried state) as a whole draw would."""
         cut = slice(lo, hi)
         sun = sun_on_grid(t_s, self.sun_nodes)
         alpha = self.orbit.right_ascension(t_s, self.gmst0)
         shadow[cut] = self._shadow(a + lo, a + hi, alpha, sun)
         step_inputs(t_s, self.epoch, self.orbit, self.environment, sun, shadow[cut],
                     {k: v[cut] for k, v in inputs.items()})
-        if ripple and self.sigma > 0:
+        if not draw:
+            return
+        if self.sigma > 0:
             rows = inputs["ripple"][cut]
             self.rng.standard_normal(out=rows)
             rows *= self.sigma
+        if self.disturbance_draw is not None:
+            rows = inputs["disturbance"][cut]
+            self.disturbance_draw.fill(rows)
+            if self.extra_torque is not None:
+                np.add(inputs["external"][cut], rows, out=inputs["n_ext"][cut])
 
     def sun(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Samples a … b−1 (any range, no rollout, nothing carried): their times, the
@@ -208,7 +234,7 @@ class TruthStream:
             raise ValueError(f"samples [{a}, {b}) are outside the run's {self.n_samples}")
         t_s = self._t(np.arange(a, b))
         inputs, shadow = self._window_inputs(a, b)
-        self._fill(a, 0, b - a, t_s, inputs, shadow, ripple=False)
+        self._fill(a, 0, b - a, t_s, inputs, shadow, draw=False)
         return t_s, inputs["sun_r"], inputs["sun_scale"]
 
     def window(self, a: int, b: int, sense=None, piece: int = SENSE_PIECE):
@@ -290,15 +316,20 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
                    rng: np.random.Generator | None = None,
                    extra_torque: np.ndarray | None = None,
                    wheel_torque: np.ndarray | None = None,
-                   model: TruthModel | None = None) -> TruthResult:
+                   model: TruthModel | None = None,
+                   disturbance: Disturbance | None = None,
+                   disturbance_rng: np.random.Generator | None = None) -> TruthResult:
     """Simulate the nonlinear truth on ``t = 0, dt, …`` up to ``duration_s``.
 
     ``rng`` supplies the wheel ripple; it is required when ripple is enabled so
     that every random draw traces back to the scenario seed.  ``extra_torque``
     (N, 3) adds a body torque and ``wheel_torque`` (N, n_wheels) adds motor torques
-    to the control's, each held over its step.  ``final_state`` is the state one
+    to the control's, each held over its step.  ``disturbance`` (``sim.disturbance``)
+    adds its random body torque, drawn from ``disturbance_rng`` (required when its
+    kind is not none) and held over each step too.  ``final_state`` is the state one
     step after the last sample (the step that produced the last sample's outputs).
     """
     stream = TruthStream(spacecraft, orbit, environment, control, initial, epoch, duration_s,
-                         dt_s, rng, extra_torque, wheel_torque, model)
+                         dt_s, rng, extra_torque, wheel_torque, model, disturbance,
+                         disturbance_rng)
     return stream.window(0, stream.n_samples)

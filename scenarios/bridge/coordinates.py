@@ -21,8 +21,9 @@ from dynprop.sim.history import EXTERNAL_TORQUES
 
 def external_torque(truth) -> np.ndarray:
     """The truth's external torque (N, 3), body axes: every source of
-    ``sim.history.EXTERNAL_TORQUES`` (gravity gradient excluded)."""
-    return sum(truth.torques[k] for k in EXTERNAL_TORQUES)
+    ``sim.history.EXTERNAL_TORQUES`` the truth holds (gravity gradient excluded; the
+    disturbance only in runs that fly one)."""
+    return sum(truth.torques[k] for k in EXTERNAL_TORQUES if k in truth.torques)
 
 
 def step_rates(h_Nms: np.ndarray, dt_s: float, h_next: float | None = None) -> np.ndarray:

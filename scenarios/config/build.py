@@ -8,7 +8,7 @@ from datetime import datetime
 
 import numpy as np
 from dynprop.estimator.model import ModelParams, ProcessNoise
-from dynprop.sim import control, environment, ephemeris, sensors, spacecraft
+from dynprop.sim import control, disturbance, environment, ephemeris, sensors, spacecraft
 from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.truth import InitialState, TruthStream
 
@@ -25,11 +25,25 @@ STREAMS = ("ripple", "earth", "tachometer", "dss", "cass1", "cass2")
 # (k, DISPERSION_STREAM, crc32(key))): case k's own child, one stream per key, so
 # adding a dispersion never moves another key's draw.
 DISPERSION_STREAM = len(STREAMS)
+# The disturbance torque of run k draws from SeedSequence(seed, spawn_key=(k,
+# DISTURBANCE_STREAM)), made only for a scenario that flies one: a stream of its own
+# past DISPERSION_STREAM rather than one more of STREAMS, which would move
+# DISPERSION_STREAM and with it every Monte Carlo case's dispersed values.
+DISTURBANCE_STREAM = DISPERSION_STREAM + 1
 
 
 def streams(seed: int, run: int = 0) -> dict[str, np.random.Generator]:
     return {name: np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, i)))
             for i, name in enumerate(STREAMS)}
+
+
+def disturbance_generator(s: Scenario, run: int = 0) -> np.random.Generator | None:
+    """Run ``run``'s disturbance generator (``DISTURBANCE_STREAM``), or None when the
+    scenario flies no disturbance (nothing is drawn then)."""
+    if not build_disturbance(s).enabled:
+        return None
+    return np.random.default_rng(np.random.SeedSequence(
+        s.seed, spawn_key=(run, DISTURBANCE_STREAM)))
 
 
 def epoch(s: Scenario) -> datetime:
@@ -64,6 +78,13 @@ def build_environment(s: Scenario) -> environment.Environment:
         environment.WheelRipple(e.ripple.enabled and s.sensors.noise.enabled,
                                 e.ripple.psd_Nm2_per_Hz),
         e.shadow_model)
+
+
+def build_disturbance(s: Scenario) -> disturbance.Disturbance:
+    d = s.environment.disturbance
+    # The noise switch turns off every random draw, the disturbance included.
+    kind = d.kind if s.sensors.noise.enabled else "none"
+    return disturbance.Disturbance(kind, d.q_Nm2s, d.sigma_Nm, d.correlation_time_s)
 
 
 def build_control(s: Scenario) -> control.Control:
@@ -124,10 +145,14 @@ def yaw_factors(s: Scenario) -> np.ndarray:
 
 
 def truth_stream(s: Scenario, rng: np.random.Generator, duration_s: float | None = None,
-                 dt_s: float | None = None, model=None) -> TruthStream:
+                 dt_s: float | None = None, model=None,
+                 disturbance_rng: np.random.Generator | None = None) -> TruthStream:
     """The truth of ``s`` as a stream of windows (``sim.truth.TruthStream``), its wheel
-    ripple drawn from ``rng``; ``duration_s`` and ``dt_s`` default to the scenario's."""
+    ripple drawn from ``rng`` and its disturbance, if it flies one, from
+    ``disturbance_rng`` (``disturbance_generator(s, run)``: required then); ``duration_s``
+    and ``dt_s`` default to the scenario's."""
     return TruthStream(build_spacecraft(s), orbit(s), build_environment(s), build_control(s),
                        build_initial(s), epoch(s),
                        s.duration_s if duration_s is None else duration_s,
-                       s.sample_interval_s if dt_s is None else dt_s, rng=rng, model=model)
+                       s.sample_interval_s if dt_s is None else dt_s, rng=rng, model=model,
+                       disturbance=build_disturbance(s), disturbance_rng=disturbance_rng)

@@ -22,6 +22,7 @@ from .estimation import DEFAULT_OUTPUT_INTERVAL_S, TELEMETRY_AUTO_MAX_S, Estimat
 from .montecarlo import MonteCarlo, check_dispersion
 from .sections import (
     Control,
+    Disturbance,
     Environment,
     InitialState,
     Orbit,
@@ -165,7 +166,12 @@ def leaf_paths(model: type[BaseModel], prefix: str = "") -> list[str]:
 
 def resolved_yaml(scenario: Scenario) -> str:
     """Every key with its value, defaults filled, stamped with this version; loads
-    back to the same scenario."""
+    back to the same scenario.  The one exception: ``environment.disturbance`` is
+    written only when it differs from its defaults, so that a scenario without one
+    resolves to the very text it did before the section existed (its run directories,
+    and the digest that resumes a Monte Carlo set, unchanged)."""
     data = scenario.model_dump(mode="json")
+    if scenario.environment.disturbance == Disturbance():
+        del data["environment"]["disturbance"]
     data["dynprop_version"] = __version__
     return yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)

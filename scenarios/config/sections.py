@@ -12,6 +12,7 @@ from typing import Annotated, Literal
 
 import numpy as np
 from dynprop.sim import control as sim_control
+from dynprop.sim import disturbance as sim_disturbance
 from dynprop.sim import environment as sim_env
 from dynprop.sim import sensors, spacecraft
 from dynprop.sim.frames import GeoOrbit
@@ -23,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, mode
 _SOLAR = sim_env.SolarTorque()
 _MAG = sim_env.MagneticTorque()
 _RIPPLE = sim_env.WheelRipple()
+_DISTURBANCE = sim_disturbance.Disturbance()
 _CTRL = sim_control.Control()
 _EARTH = sensors.EarthSensor()
 _TACH = sensors.Tachometer()
@@ -142,6 +144,37 @@ class Ripple(_Section):
                                   description="one-sided PSD G; step variance G/(2Δt) ((N m)²/Hz)")
 
 
+class Disturbance(_Section):
+    """A random body torque that the filter's model does not contain, independent on
+    roll (x), pitch (y) and yaw (z) and held over each step (`sim/disturbance.py`).
+    The levels default to the paper's Eq. 45 assumption, about 10% of the equinox
+    torque amplitude correlated over a quarter orbit, and act only when `kind` selects
+    them. `sensors.noise.enabled: false` turns the disturbance off with every other
+    random draw."""
+
+    kind: Literal["none", "white", "gauss_markov"] = Field(
+        "none", description="'none'; 'white': white noise of density q_Nm2s; "
+        "'gauss_markov': first-order Gauss–Markov of sigma_Nm and correlation_time_s")
+    q_Nm2s: Vec3 = Field(_DISTURBANCE.q_Nm2s,
+                         description="white: two-sided spectral density per axis, none "
+                         "negative, E[w(t)w(t')] = q δ(t−t') (Eq. 35); each step holds a "
+                         "draw of variance q/Δt ((N m)² s)")
+    sigma_Nm: Vec3 = Field(_DISTURBANCE.sigma_Nm,
+                           description="gauss_markov: stationary 1σ per axis, none "
+                           "negative (N m)")
+    correlation_time_s: float = Field(
+        _DISTURBANCE.correlation_time_s, gt=0,
+        description="gauss_markov: correlation time τ of the autocorrelation "
+        "σ² exp(−|t|/τ); the default is a quarter orbit (s)")
+
+    @field_validator("q_Nm2s", "sigma_Nm")
+    @classmethod
+    def _non_negative(cls, v):
+        if any(x < 0 for x in v):
+            raise ValueError("must not be negative")
+        return v
+
+
 class Environment(_Section):
     gravity_gradient: GravityGradient = Field(default_factory=GravityGradient)
     solar: Solar = Field(default_factory=Solar)
@@ -149,6 +182,7 @@ class Environment(_Section):
     ripple: Ripple = Field(default_factory=Ripple)
     shadow_model: Literal["conical", "cylindrical", "none"] = Field(
         "conical", description="Earth shadow model; 'none' removes eclipses")
+    disturbance: Disturbance = Field(default_factory=Disturbance)
 
 
 class Control(_Section):
@@ -171,8 +205,8 @@ class Control(_Section):
 
 
 class Noise(_Section):
-    enabled: bool = Field(True, description="false turns every random draw off (sensor noise "
-                          "and wheel ripple); quantisation stays")
+    enabled: bool = Field(True, description="false turns every random draw off (sensor noise, "
+                          "wheel ripple and the disturbance torque); quantisation stays")
 
 
 class EarthSensor(_Section):

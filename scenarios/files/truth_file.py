@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from dynprop.sim.frames import dcm_from_euler312, rate_wrt_orbit
-from dynprop.sim.history import EXTERNAL_TORQUES, Euler312
+from dynprop.sim.history import EXTERNAL_TORQUES, OPTIONAL_TORQUES, Euler312
 
 from ..config import build
 from ..config.schema import Scenario
@@ -30,7 +30,8 @@ ATTITUDE = ("t_s", "yaw_deg", "roll_deg", "pitch_deg", "wx_radps", "wy_radps", "
 class TruthFromFile(Euler312):
     """truth.csv at the filter's grid times: what ``bridge.coordinates.truth_torques``
     and ``model_truth`` read of a truth, and ``euler_rad`` (yaw, roll, pitch) for the
-    figures.  ``torques`` holds the external sources (``sim.history.EXTERNAL_TORQUES``)."""
+    figures.  ``torques`` holds the external sources (``sim.history.EXTERNAL_TORQUES``)
+    the file has: the optional ones (the disturbance) only when it has their columns."""
 
     t_s: np.ndarray
     euler_rad: np.ndarray
@@ -43,7 +44,12 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
     """The truth at the filter's grid times ``t_grid`` (every one must have a row)."""
     path = Path(path)
     cols = read_input_csv(path, "truth")
-    torque_cols = [f"{src}_{a}_Nm" for src in EXTERNAL_TORQUES for a in "xyz"]
+    # The optional sources have columns only in runs that flew them: read when the file
+    # has any of their columns, and required when the scenario flies them.
+    flown = {"disturbance"} if build.build_disturbance(s).enabled else set()
+    sources = [src for src in EXTERNAL_TORQUES if src not in OPTIONAL_TORQUES
+               or src in flown or any(f"{src}_{a}_Nm" in cols for a in "xyz")]
+    torque_cols = [f"{src}_{a}_Nm" for src in sources for a in "xyz"]
     missing = [c for c in (*ATTITUDE, *torque_cols) if c not in cols]
     if missing:
         raise RunDirError("\n".join(f"{path}: missing column {c}" for c in missing))
@@ -65,5 +71,5 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
     c_br = dcm_from_euler312(euler[:, 0], euler[:, 1], euler[:, 2])
     w_br = rate_wrt_orbit(c_br, w_bn, build.orbit(s).rate_radps)
     torques = {src: np.column_stack([at[f"{src}_{a}_Nm"] for a in "xyz"])
-               for src in EXTERNAL_TORQUES}
+               for src in sources}
     return TruthFromFile(t_grid, euler, w_br, at["h_Nms"], torques)

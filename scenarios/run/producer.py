@@ -60,7 +60,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
     """Truth, telemetry and the linear twin with its filter, window by window (see
     the module doc)."""
     rngs = build.streams(s.seed, run)
-    stream = build.truth_stream(s, rngs.pop("ripple"))
+    stream = build.truth_stream(s, rngs.pop("ripple"),
+                                disturbance_rng=build.disturbance_generator(s, run))
     plan = make_plan(s, stream.n_samples, window_samples)
     yield plan
     suite = build.build_sensors(s)

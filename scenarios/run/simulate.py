@@ -29,10 +29,12 @@ class Simulation:
 
 def simulate(scenario: Scenario, run: int = 0, model=None) -> Simulation:
     """Truth and telemetry for one run; every random stream comes from
-    ``build.streams(scenario.seed, run)``."""
+    ``build.streams(scenario.seed, run)`` (and the disturbance's, if it flies one,
+    from ``build.disturbance_generator(scenario, run)``)."""
     rngs = build.streams(scenario.seed, run)
     suite = build.build_sensors(scenario)
-    stream = build.truth_stream(scenario, rngs["ripple"], model=model)
+    stream = build.truth_stream(scenario, rngs["ripple"], model=model,
+                                disturbance_rng=build.disturbance_generator(scenario, run))
     with ThreadPoolExecutor(1) as pool:   # both cores (sense_window)
         truth, tel, _ = sense_window(stream, 0, stream.n_samples, suite, rngs, pool,
                                      scenario.sensors.sun.min_sun_separation_deg)

@@ -121,9 +121,9 @@ def solar_unit_torque(s: Scenario, batch: Batch, every: int = SHAPE_EVERY
     shadow in an Earth-pointing body (as the truth computes it), every ``every``-th
     sample: times, torques (M, 2), and the sunlit share of the batch.  It does not
     depend on ``environment.solar.enabled``, which is the truth's business."""
-    # No draws: ``sun`` rolls nothing out.
+    # No draws: ``sun`` rolls nothing out, so any generators will do.
     stream = build.truth_stream(s, np.random.default_rng(0), (batch.k1 - 1) * batch.dt_s,
-                                batch.dt_s)
+                                batch.dt_s, disturbance_rng=np.random.default_rng(0))
     lever = np.asarray(stream.environment.solar.lever_axis, dtype=float)
     day = int(round(DAY_S / batch.dt_s))
     t, torque, sunlit = [], [], 0

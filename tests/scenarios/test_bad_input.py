@@ -124,6 +124,29 @@ def test_a_run_shorter_than_one_step_is_refused(capsys, tmp_path, duration):
     assert line.startswith("duration_s: ")
 
 
+@pytest.mark.parametrize("fields, line", [
+    ("kind: gauss_markov, sigma_Nm: [5e-6, -1e-6, 5e-6]",
+     "environment.disturbance.sigma_Nm: must not be negative"),
+    ("kind: white, q_Nm2s: [0, 0, -1e-9]",
+     "environment.disturbance.q_Nm2s: must not be negative"),
+    ("kind: gauss_markov, correlation_time_s: 0",
+     "environment.disturbance.correlation_time_s: Input should be greater than 0"),
+    ("kind: gauss_markov, correlation_time_s: .nan",
+     "environment.disturbance.correlation_time_s: Input should be a finite number"),
+    ("kind: gauss_markov, sigma_Nm: [5e-6, .nan, 5e-6]",
+     "environment.disturbance.sigma_Nm: Input should be a finite number at [1]"),
+    ("kind: gauss_markov, correlaton_time_s: 100",
+     "environment.disturbance.correlaton_time_s: unknown key; did you mean "
+     "'correlation_time_s'?"),
+    ("kind: markov",
+     "environment.disturbance.kind: Input should be 'none', 'white' or 'gauss_markov'"),
+])
+def test_a_bad_disturbance_value_is_one_line_naming_the_field(capsys, tmp_path, fields, line):
+    lines = check_refused(capsys, tmp_path,
+                          f"name: x\nenvironment:\n  disturbance: {{{fields}}}\n")
+    assert lines == [line]
+
+
 def test_a_misspelt_dispersed_key_names_the_scenario_key_it_meant():
     raw = {"name": "x", "duration_s": 0.1, "montecarlo": {"dispersions": {
         "spacecraft.wheels.sped_rpm": {"distribution": "normal", "sigma": 1.0},

@@ -20,6 +20,8 @@ from scipy import stats
 from scenarios.config import build
 from scenarios.config.loader import ScenarioError, load_scenario
 from scenarios.montecarlo.dispersions import draw_case
+from scenarios.run.simulate import simulate
+from sim.disturbance import draw
 from sim.ephemeris import parse_epoch
 
 from .mc_helpers import (
@@ -231,6 +233,49 @@ def test_dispersed_key_draws_from_its_own_child_of_the_case():
         # The draw is that stream's first normal: another stream moves it by O(0.5°).
         assert draw_case(s, k)[0][key] == pytest.approx(s.initial_state.yaw_deg
                                                         + (0.2 + 0.5 * z), rel=0, abs=1e-12)
+
+
+def test_the_disturbance_has_its_own_stream_per_case():
+    """Case (run) k's disturbance draws from SeedSequence(seed, spawn_key=(k, 7)): numpy's
+    child 7 of case k, one past the dispersions' (k, 6, ·), and made only for a scenario
+    that flies one.  STREAMS, and with it DISPERSION_STREAM = 6, are what they were."""
+    assert build.STREAMS == ("ripple", "earth", "tachometer", "dss", "cass1", "cass2")
+    assert build.DISPERSION_STREAM == 6
+    s = load_scenario("goes_next_paper_torques")
+    for k in (0, 1, 5):
+        want = np.random.default_rng(np.random.SeedSequence(s.seed).spawn(k + 1)[k].spawn(8)[7])
+        assert np.array_equal(build.disturbance_generator(s, k).standard_normal(8),
+                              want.standard_normal(8))
+    assert build.disturbance_generator(load_scenario("goes_next_equinox"), 0) is None
+
+
+def test_the_disturbance_levels_are_dispersed_like_any_numeric_key():
+    """`environment.disturbance.sigma_Nm` and `correlation_time_s` disperse as every
+    numeric key does (a 3-vector per component, a number), each from its own key
+    stream; the case flies the dispersed levels, drawn from its own stream (k, 7)."""
+    sigma_key, tau_key = "environment.disturbance.sigma_Nm", \
+        "environment.disturbance.correlation_time_s"
+    low, high = np.array([-1e-6, 0.0, -2e-6]), np.array([1e-6, 0.0, 2e-6])
+    s = load_scenario("goes_next_paper_torques", ["duration_s=60", dispersions_override({
+        sigma_key: {"distribution": "uniform", "low": low.tolist(), "high": high.tolist()},
+        tau_key: {"distribution": "normal", "sigma": 1000.0}})])
+
+    def key_stream(k, key):
+        return np.random.default_rng(np.random.SeedSequence(
+            s.seed, spawn_key=(k, len(build.STREAMS), zlib.crc32(key.encode()))))
+    for k in (0, 3):
+        values, flying = draw_case(s, k)
+        u = key_stream(k, sigma_key).random(3)
+        sigma = np.array([5e-6, 0.0, 5e-6]) + low + (high - low) * u
+        tau = 21541.0 + 1000.0 * key_stream(k, tau_key).standard_normal()
+        np.testing.assert_allclose(values[sigma_key], sigma, rtol=0, atol=1e-20)
+        assert values[tau_key] == pytest.approx(tau, rel=1e-15)
+        d = build.build_disturbance(flying)
+        assert d.sigma_Nm == tuple(values[sigma_key]) and d.correlation_time_s == values[tau_key]
+        sim = simulate(flying, run=k)
+        want = draw(d, flying.sample_interval_s, len(sim.truth.t_s), np.random.default_rng(
+            np.random.SeedSequence(s.seed, spawn_key=(k, 7))))
+        assert np.array_equal(sim.truth.torques["disturbance"], want)
 
 
 # --------------------------------------------------------------------------- 3. validation

@@ -77,7 +77,8 @@ def csv_columns(path: Path) -> list[str]:
 @pytest.fixture(scope="module")
 def written(tmp_path_factory) -> dict[str, Path]:
     """Ten minutes of each command (a Monte Carlo case included; `run` at its default
-    output cadence, whose comparison.npz has the envelopes, and at every sample)."""
+    output cadence, whose comparison.npz has the envelopes, and at every sample; a
+    scenario with a disturbance torque)."""
     base = tmp_path_factory.mktemp("outputs-doc")
     dirs = {}
     for name, argv in (("run", ("run", "goes_next_equinox", "--duration-s", "600")),
@@ -86,7 +87,10 @@ def written(tmp_path_factory) -> dict[str, Path]:
                                      "--set", "output.interval_s=0.512")),
                        ("case", ("run", "goes_next_equinox", "--duration-s", "600",
                                  "--montecarlo-case", "1")),
-                       ("simulate", ("simulate", "backup_wheel", "--duration-s", "600"))):
+                       ("simulate", ("simulate", "backup_wheel", "--duration-s", "600")),
+                       # truth.csv's disturbance columns, written only with a disturbance
+                       ("simulate_torques", ("simulate", "goes_next_paper_torques",
+                                             "--duration-s", "600"))):
         rc, _, err = run_cli(*argv, "--out", str(base / name))
         assert rc == 0, err
         dirs[name] = base / name
