@@ -39,3 +39,36 @@ def fraction_inside(values: np.ndarray, bounds: tuple[float, float]) -> float:
     v = np.asarray(values)
     v = v[np.isfinite(v)]
     return float(np.mean((v >= bounds[0]) & (v <= bounds[1]))) if v.size else float("nan")
+
+
+def autocorrelation(e: np.ndarray, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised autocorrelation ρ(k), k = 0 … max_lag, of a series with gaps (NaN):
+    the mean of e_t e_{t+k} over the pairs where both are present, over the mean of
+    e_t² (Box–Jenkins, for a series of zero mean: the standardised innovations ν/√S of
+    a consistent filter).  Returns ρ and the number of pairs at each lag.  White, ρ(k)
+    for k ≥ 1 lies within ±1.96/√pairs 95% of the time."""
+    e = np.asarray(e, dtype=float)
+    present = np.isfinite(e)
+    x = np.where(present, e, 0.0)
+    n = len(x)
+    size = 1 << int(np.ceil(np.log2(2 * n)))   # no wrap-around: zero-padded FFT
+    fx = np.fft.rfft(x, size)
+    fm = np.fft.rfft(present.astype(float), size)
+    sums = np.fft.irfft(fx * np.conj(fx), size)[:max_lag + 1]
+    pairs = np.rint(np.fft.irfft(fm * np.conj(fm), size)[:max_lag + 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = sums / pairs
+    return mean / mean[0], pairs.astype(np.int64)
+
+
+def whiteness(e: np.ndarray, max_lag: int) -> dict:
+    """How white a standardised innovation series is: ρ(k) for k = 1 … max_lag against
+    ±1.96/√pairs; the share of lags outside (about 5% for a white series), the largest
+    |ρ| and ρ(1).  None where there are too few samples to judge."""
+    rho, pairs = autocorrelation(e, max_lag)
+    ok = pairs[1:] >= 30
+    if not ok.any():
+        return {"lags": 0, "fraction_outside": None, "max_abs_rho": None, "rho_1": None}
+    r, bound = rho[1:][ok], 1.96 / np.sqrt(pairs[1:][ok])
+    return {"lags": int(ok.sum()), "fraction_outside": float(np.mean(np.abs(r) > bound)),
+            "max_abs_rho": float(np.abs(r).max()), "rho_1": float(rho[1])}

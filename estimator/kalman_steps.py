@@ -90,6 +90,37 @@ def pack_params(disc, Qd_unit=None) -> np.ndarray:
     return np.concatenate([Phi.ravel(order="F"), Gam.ravel(order="F"), pack(Qd), pack(Qe)])
 
 
+def sequential_update(x, P, z, m, r, trace: list | None = None):
+    """The scalar updates of roll, yaw and h in turn (Eqs. 36–38), each in Joseph form
+    (Eq. 37); returns the updated x, P and each measurement's innovation ν and its
+    variance S.  Shared by the filter's step and the likelihood's (``likelihood``),
+    which takes each update's P before it and gain K from ``trace``."""
+    eye = ca.SX.eye(N_STATES)
+    nus, ss = [], []
+    for i, idx in enumerate(MEAS_STATES):
+        S = P[idx, idx] + r[i]
+        # An absent measurement (m = 0) zeroes the gain, and with K = 0 the Joseph
+        # form returns P unchanged bit for bit (I P Iᵀ + r·0): no branches needed.
+        K = m[i] * P[:, idx] / S
+        nu = z[i] - x[idx]
+        if trace is not None:
+            trace.append((P, K))
+        G = ca.SX(1, N_STATES)
+        G[idx] = 1.0
+        ikg = eye - K @ G
+        P = _symmetric(ikg @ P @ ikg.T + r[i] * (K @ K.T))  # Joseph form, Eq. 37
+        x = x + K * nu
+        nus.append(nu)
+        ss.append(S)
+    return x, P, nus, ss
+
+
+def propagation(x, P, u, e, phi, gam, qd, qe):
+    """x⁻ = Φ x⁺ + Γ ū and P⁻ = Φ P⁺ Φᵀ + Q_d + e·Q_e (Eqs. 31–32, ``ExtraNoise``)."""
+    # + e·Q_e after + Q_d: with e = 0 it adds (±)0 and changes no bit.
+    return phi @ x + gam @ u, _symmetric(phi @ P @ phi.T + qd + e * qe)
+
+
 @lru_cache(maxsize=2)
 def filter_step() -> ca.Function:
     """``(s, z, m, r, u, e, p) -> (s_next, aux)`` with s = [x⁻, P⁻ (45)] at t_k,
@@ -102,24 +133,8 @@ def filter_step() -> ca.Function:
     r, u, e = ca.SX.sym("r", 3), ca.SX.sym("u", N_STATES), ca.SX.sym("e")
     p, phi, gam, qd, qe = _params_sym()
     x, P = s[:N_STATES], _unpack_sym(s[N_STATES:])
-    eye = ca.SX.eye(N_STATES)
-    nus, ss = [], []
-    for i, idx in enumerate(MEAS_STATES):
-        S = P[idx, idx] + r[i]
-        # An absent measurement (m = 0) zeroes the gain, and with K = 0 the Joseph
-        # form returns P unchanged bit for bit (I P Iᵀ + r·0): no branches needed.
-        K = m[i] * P[:, idx] / S
-        nu = z[i] - x[idx]
-        G = ca.SX(1, N_STATES)
-        G[idx] = 1.0
-        ikg = eye - K @ G
-        P = _symmetric(ikg @ P @ ikg.T + r[i] * (K @ K.T))  # Joseph form, Eq. 37
-        x = x + K * nu
-        nus.append(nu)
-        ss.append(S)
-    x_next = phi @ x + gam @ u
-    # + e·Q_e after + Q_d: with e = 0 it adds (±)0 and changes no bit.
-    P_next = _symmetric(phi @ P @ phi.T + qd + e * qe)
+    x, P, nus, ss = sequential_update(x, P, z, m, r)
+    x_next, P_next = propagation(x, P, u, e, phi, gam, qd, qe)
     out = ca.cse(ca.vertcat(x_next, _pack_sym(P_next), x, _pack_sym(P), *nus, *ss))
     n_s = N_STATES + N_UT
     return ca.Function("dynprop_kf", [s, z, m, r, u, e, p], [out[:n_s], out[n_s:]],
