@@ -18,14 +18,15 @@ from dynprop.scenarios import __version__
 # and the facade's tables (pandas) and statistics would cost the CLI half a
 # second of start-up it never uses.
 _API = ("ScenarioError", "covariance", "linearization", "load_scenario", "montecarlo",
-        "observability", "open_run", "run", "simulate")
+        "observability", "open_run", "run", "simulate", "tune")
 _RESULTS = ("LinearizationResult", "MonteCarloResult", "RunResult", "SimulationResult",
-            "TextReport")
+            "TextReport", "TuneResult")
 
 __all__ = [  # noqa: F822 - defined by __getattr__ below
     "LinearizationResult", "MonteCarloResult", "RunResult", "ScenarioError",
-    "SimulationResult", "TextReport", "__version__", "covariance", "linearization",
-    "load_scenario", "montecarlo", "observability", "open_run", "run", "simulate",
+    "SimulationResult", "TextReport", "TuneResult", "__version__", "covariance",
+    "linearization", "load_scenario", "montecarlo", "observability", "open_run", "run",
+    "simulate", "tune",
 ]
 
 

@@ -17,10 +17,11 @@ from .results import (
     RunResult,
     SimulationResult,
     TextReport,
+    TuneResult,
 )
 
 __all__ = ["ScenarioError", "covariance", "linearization", "load_scenario", "montecarlo",
-           "observability", "open_run", "run", "simulate"]
+           "observability", "open_run", "run", "simulate", "tune"]
 
 
 def load_scenario(name_or_path: str | Path, set: dict | None = None, **overrides
@@ -145,3 +146,28 @@ def covariance(scenario: Scenario | str) -> TextReport:
     params, noise = estimator_model(s)
     report = covariance_report(params, noise, estimator_sensor_specs(s))
     return TextReport(format_covariance_report(report), report)
+
+
+def tune(source, scenario: Scenario | str | None = None, params=None, tie_xz: bool = False,
+         roll_variance: bool = False, bounds: dict | None = None) -> TuneResult:
+    """The filter's noise from its own telemetry by maximum likelihood, no truth
+    (`dynprop tune`): ``source`` a run (``RunResult`` or its directory, whose
+    telemetry.csv it reads) or a telemetry file with its ``scenario``::
+
+        t = dynprop.tune(r)                    # r = dynprop.run(s)
+        t.estimated["q_z"]                     # {"value", "sigma", "status", ...}
+        s2 = dynprop.load_scenario(s.name, set=t.overrides)   # the tuned noise
+        t.figure(); t.save("runs/eq/tune")"""
+    from dynprop.scenarios.tune.fit import TuneOptions
+    from dynprop.scenarios.tune.report import run_tune
+    path = getattr(source, "path", source)
+    if scenario is not None and not isinstance(scenario, str | Path):
+        owner_s = Path(tempfile.mkdtemp(prefix="dynprop-scenario-"))
+        (owner_s / "scenario.yaml").write_text(str(scenario))
+        scenario = owner_s / "scenario.yaml"
+    kw = {} if params is None else {"params": tuple(params)}
+    options = TuneOptions(tie_xz=tie_xz, roll_variance=roll_variance,
+                          bounds=dict(bounds or {}), **kw)
+    owner, out = _temporary("tune")
+    run_tune(Path(path), scenario, [], out, options, force=False)
+    return TuneResult(out, owner)

@@ -178,3 +178,37 @@ class TextReport:
 
     def __repr__(self) -> str:
         return self.text
+
+
+class TuneResult(_Directory):
+    """`dynprop tune`: ``summary`` (tune.json's dict), ``estimated`` (each tuned
+    ``estimator.process_noise`` key: value, σ, status, limit, the value used),
+    ``overrides`` (the tuned noise as ``load_scenario(set=...)`` takes it),
+    ``markdown`` (tune.md), ``figure()`` (tune.png) and ``save(dir)``."""
+
+    @property
+    def summary(self) -> dict:
+        return json.loads((self.path / "tune.json").read_text())
+
+    @property
+    def estimated(self) -> dict:
+        return self.summary["estimated"]
+
+    @property
+    def overrides(self) -> dict:
+        return {f"estimator.process_noise.{k}": v
+                for k, v in self.summary["tuned_process_noise"].items()}
+
+    @property
+    def markdown(self) -> str:
+        return (self.path / "tune.md").read_text()
+
+    def figure(self):
+        """tune.png as a matplotlib Figure (an image of the saved file)."""
+        import matplotlib.image as mpimg
+        import matplotlib.pyplot as plt
+        img = mpimg.imread(self.path / "tune.png")
+        fig, ax = plt.subplots(figsize=(img.shape[1] / 100, img.shape[0] / 100))
+        ax.imshow(img)
+        ax.axis("off")
+        return fig

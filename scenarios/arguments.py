@@ -61,6 +61,27 @@ def _case_list(text: str) -> tuple[int, ...]:
     return tuple(_case_number(part) for part in text.split(",") if part.strip())
 
 
+def _tuned_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--tuned-from", type=Path, metavar="DIR", help="the process noise `dynprop "
+                   "tune` estimated (DIR/tune.json, or DIR/tune/tune.json of a tuned run), "
+                   "in place of the scenario's; summary.json says so")
+
+
+def _noise_keys(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(",") if part.strip())
+
+
+def _bound(text: str) -> tuple[str, float, float]:
+    key, sep, rng = text.partition("=")
+    low, sep2, high = rng.partition(":")
+    try:
+        if not (sep and sep2):
+            raise ValueError
+        return key.strip(), float(low), float(high)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=LOW:HIGH") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
     parser = _Parser(
@@ -74,6 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     run = _scenario_command(sub, "run", "truth, telemetry, the filter on it and on the "
                             "linear twin; errors, summary and figures",
                             "new run directory (default runs/NAME-TIME)", required=False)
+    _tuned_arg(run)
     run.add_argument("--montecarlo-case", type=_case_number, metavar="K",
                      help="fly Monte Carlo case K of the scenario's dispersions (the filter "
                      "stays nominal), reproducing `dynprop montecarlo`'s case K bit for bit")
@@ -90,6 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     mc.add_argument("--keep-trajectories", type=_case_list, default=(), metavar="K,K,…",
                     help="also store these cases' whole trajectories")
     mc.add_argument("--retry-failed", action="store_true", help="rerun cases that failed")
+    _tuned_arg(mc)
     est = sub.add_parser("estimate", help="the filter and smoother on a telemetry file "
                          "(dropouts and other cadences on the filter step allowed): "
                          "estimate.csv, smoothed.csv, summary.json, plots/")
@@ -97,6 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--scenario", required=True, help="scenario (e.g. the run's scenario.yaml)")
     est.add_argument("--truth", type=Path, metavar="TRUTH.csv",
                      help="a truth.csv: also compute the errors, NEES and run's summary")
+    _tuned_arg(est)
     _out_args(est, "new output directory")
     sub.add_parser("scenarios", help="list the bundled scenarios")
     _scenario_command(sub, "observability", "rank tables of the paper's Section 4")
@@ -115,6 +139,29 @@ def build_parser() -> argparse.ArgumentParser:
                       help="telemetry CSV (default: RUN_DIR/telemetry.csv)")
     trim.add_argument("--verify", action="store_true", help="fly the recommended tab over the "
                       "same span (RUN_DIR/trim/verify/) and compare before and after")
+    tune = sub.add_parser("tune", help="the filter's noise from its own telemetry by maximum "
+                          "likelihood, no truth: tune.json, tune.md, tuned_noise.yaml, "
+                          "tune.png (RUN_DIR/tune/)")
+    tune.add_argument("source", type=Path, metavar="RUN_DIR|TELEMETRY.csv",
+                      help="a `dynprop run` or `estimate` directory, or a telemetry file "
+                      "(with --scenario)")
+    tune.add_argument("--scenario", help="scenario (default: the run directory's "
+                      "scenario.yaml)")
+    tune.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                      help="override a scenario key (repeatable); VALUE is YAML")
+    tune.add_argument("--params", type=_noise_keys, metavar="KEY,KEY,…",
+                      default=None, help="the process-noise keys to tune (default: q_x, q_z, "
+                      "q_w, q_px, q_pz, q_cx, q_cz)")
+    tune.add_argument("--tie-xz", action="store_true", help="tune q_x and q_z as one (the "
+                      "paper takes them equal, Eq. 43)")
+    tune.add_argument("--roll-variance", action="store_true", help="also a factor on the Earth "
+                      "sensor's roll variance (reported, not applied)")
+    tune.add_argument("--bounds", action="append", default=[], type=_bound,
+                      metavar="KEY=LOW:HIGH", help="search bounds of a tuned key (repeatable; "
+                      "roll_variance for the factor)")
+    _out_args(tune, "output directory (default: RUN_DIR/tune, or tune/ beside the file)",
+              required=False, force="replace a non-empty --out (RUN_DIR/tune is replaced "
+              "anyway)")
     plot = sub.add_parser("plot", help="(re)draw the figures of a run or Monte Carlo directory")
     plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser

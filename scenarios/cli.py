@@ -26,11 +26,20 @@ WHOLE_ARRAY_MAX_S = 30 * 86400.0
 LOOPLESS = ("simulate", "montecarlo", "linearization")   # they simulate without the filter
 
 
+def _tuned(args) -> tuple[list[str], dict | None]:
+    """``--tuned-from``'s overrides (before the user's own ``--set``, which win) and the
+    note for the summary; nothing without it."""
+    if getattr(args, "tuned_from", None) is None:
+        return [], None
+    from .tune.noise import tuned_noise
+    return tuned_noise(args.tuned_from)
+
+
 def load_with_overrides(args, streams: bool = False):
     """The scenario with --set, --seed and --duration-s applied (validated together).
     A command that holds whole arrays (``streams=False``) refuses runs over 30 days."""
     from .config.loader import load_scenario
-    overrides = list(args.set)
+    overrides = _tuned(args)[0] + list(args.set)
     if args.seed is not None:
         overrides.append(f"seed={args.seed}")
     if args.duration_s is not None:
@@ -45,6 +54,13 @@ def load_with_overrides(args, streams: bool = False):
                          f"estimates, which only `dynprop run` carries; `dynprop "
                          f"{args.command}` would fly one tab: remove it or use `dynprop run`")
     return s
+
+
+def _note_tuned(args, path: Path) -> None:
+    note = _tuned(args)[1]
+    if note is not None:
+        from .tune.noise import note_summary
+        note_summary(path, note)
 
 
 def _cmd_simulate(args) -> int:
@@ -80,6 +96,7 @@ def _cmd_run(args) -> int:
     start = time.perf_counter()
     with staged_run_dir(out, force=args.force) as stage:
         summary = run_to_directory(scenario, stage, montecarlo_case=case)
+        _note_tuned(args, stage / "summary.json")
     errs, sigs = summary["yaw_error_at_gap_end_deg"], summary["yaw_sigma_at_gap_end_deg"]
     if len(errs) <= 6:
         ends = ", ".join(f"{e:+.4f}" for e in errs) or "none"
@@ -113,7 +130,7 @@ def _cmd_estimate(args) -> int:
     from .files.rundir import check_out_dir, staged_run_dir
     from .run.estimate import estimate_inputs, estimate_to_directory
 
-    scenario = load_scenario(args.scenario)
+    scenario = load_scenario(args.scenario, _tuned(args)[0])
     check_out_dir(args.out, args.force)
     start = time.perf_counter()
     grid, truth = estimate_inputs(scenario, args.telemetry, args.truth)
@@ -121,6 +138,7 @@ def _cmd_estimate(args) -> int:
                "truth_file": None if args.truth is None else str(args.truth)}
     with staged_run_dir(args.out, force=args.force) as stage:
         summary = estimate_to_directory(scenario, grid, truth, stage, sources)
+        _note_tuned(args, stage / "summary.json")
         written = sorted(p.relative_to(stage) for p in stage.rglob("*") if p.is_file())
     tel = summary["telemetry"]
     print(f"{scenario.name}: filtered {tel['rows']} telemetry rows on {tel['filter_steps']} "
@@ -168,6 +186,22 @@ def _cmd_trim(args) -> int:
     print(one_line(d))
     print(f"{time.perf_counter() - start:.1f} s; wrote {args.run_dir}/trim/: trim.json, "
           "trim.md, trim.png" + (", verify/" if args.verify else ""))
+    return 0
+
+
+def _cmd_tune(args) -> int:
+    from .tune.fit import TuneOptions
+    from .tune.report import one_line, run_tune
+    kw = {} if args.params is None else {"params": args.params}
+    options = TuneOptions(tie_xz=args.tie_xz, roll_variance=args.roll_variance,
+                          bounds={k: (lo, hi) for k, lo, hi in args.bounds}, **kw)
+    start = time.perf_counter()
+    d, out = run_tune(args.source, args.scenario, args.set, args.out, options,
+                      force=args.force or args.out is None,
+                      command=shlex.join(["dynprop", *sys.argv[1:]]))
+    print(one_line(d))
+    print(f"{time.perf_counter() - start:.1f} s; wrote {out}/: tune.json, tune.md, "
+          "tuned_noise.yaml, tune.png")
     return 0
 
 
@@ -241,6 +275,7 @@ def _cmd_montecarlo(args) -> int:
               f"{args.out}; rerun the same command to finish the other {left}",
               file=sys.stderr)
         return 130
+    _note_tuned(args, args.out / "montecarlo.json")
     s = result.summary
     verb = "resumed" if result.resumed else "new"
     print(f"{scenario.name}: {verb} set, ran {result.ran} of {args.runs} cases "
@@ -256,7 +291,7 @@ COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd
             "run": _cmd_run, "estimate": _cmd_estimate,
             "observability": _cmd_observability, "covariance": _cmd_covariance,
             "linearization": _cmd_linearization, "montecarlo": _cmd_montecarlo,
-            "trim": _cmd_trim}
+            "trim": _cmd_trim, "tune": _cmd_tune}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -265,9 +300,11 @@ def main(argv: list[str] | None = None) -> int:
     from .files.rundir import RunDirError
     from .montecarlo import SchedulerError
     from .trim.batch import TrimError
+    from .tune.source import TuneError
     try:
         return COMMANDS[args.command](args)
-    except (InputError, RunDirError, ScenarioError, SchedulerError, TrimError) as exc:
+    except (InputError, RunDirError, ScenarioError, SchedulerError, TrimError,
+            TuneError) as exc:
         # One line per problem, each naming its key path, column or argument.
         for line in str(exc).splitlines() or [""]:
             print(f"dynprop: error: {line}", file=sys.stderr)

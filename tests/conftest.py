@@ -5,7 +5,10 @@ the CasADi VM gives other last bits than the compiled C, as another CPU or
 compiler would, so a tolerance that only holds on the machine the test was
 written on shows up there.  Tests whose requirement *is* compiled code (that the
 compiled backend was used, or bit identity with a compiled result) carry
-``@pytest.mark.compiled_only`` and are skipped in that pass.
+``@pytest.mark.compiled_only`` and are skipped in that pass; so are those marked
+``slow_in_vm``: statistical checks over days of telemetry (noise recovered within 2σ)
+whose tolerances are orders above any last-bit difference and which take minutes in
+the VM.
 """
 
 import importlib
@@ -50,6 +53,10 @@ def pytest_collection_modifyitems(config, items):
     if os.environ.get("DYNPROP_BACKEND", "").lower() != "vm":
         return
     skip = pytest.mark.skip(reason="requires compiled code; this is the DYNPROP_BACKEND=vm pass")
+    slow = pytest.mark.skip(reason="a statistical check over days of telemetry, its tolerance "
+                            "far above last-bit differences: the compiled pass runs it")
     for item in items:
         if "compiled_only" in item.keywords:
             item.add_marker(skip)
+        elif "slow_in_vm" in item.keywords:
+            item.add_marker(slow)

@@ -62,20 +62,28 @@ def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
     return out
 
 
-def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
-                  known_Nm=None):
-    """Telemetry arrays to the filter's measurements, inputs u and any dropout noise
-    (``ExtraNoise`` or None).  ``known_Nm`` (N, 2), roll and yaw torques known per
-    sample, joins the modelled N_x*, N_z* (Eq. 9)."""
+def prepared_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
+                    known_Nm=None):
+    """Telemetry arrays to the filter's measurements and inputs
+    (``estimator.preprocess.FilterInputs``, with a dropout's measured wheel noise).
+    ``known_Nm`` (N, 2), roll and yaw torques known per sample, joins the modelled
+    N_x*, N_z* (Eq. 9)."""
     e = s.estimator
     if yaw_sigma is not None and sun_head is not None:
         yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
     nx, nz = e.model_torques.roll_Nm, e.model_torques.yaw_Nm
     if known_Nm is not None:
         nx, nz = nx + known_Nm[:, 0], nz + known_Nm[:, 1]
-    inputs = prepare(params, s.sample_interval_s, roll, yaw, speeds, build.yaw_factors(s),
-                     build.estimator_sensor_specs(s), yaw_sigma, nx, nz,
-                     e.wheel_torque_window_s)
+    return prepare(params, s.sample_interval_s, roll, yaw, speeds, build.yaw_factors(s),
+                   build.estimator_sensor_specs(s), yaw_sigma, nx, nz, e.wheel_torque_window_s)
+
+
+def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
+                  known_Nm=None):
+    """Telemetry arrays to the filter's measurements, inputs u and any dropout noise
+    (``ExtraNoise`` or None); ``prepared_inputs`` says what each is."""
+    e = s.estimator
+    inputs = prepared_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm)
     extra = None
     if inputs.wheel_noise is not None:
         unit = discretize(params, em.ProcessNoise(q_x=0.0, q_z=0.0, q_w=1.0),

@@ -1,7 +1,7 @@
 """Figures: the only room that imports ``plots`` (matplotlib drawings of plain
 arrays).  Each module reads what a command wrote or computed and hands ``plots``
 its arrays: ``run`` (a `run` or `estimate` directory, and `dynprop plot`),
-``montecarlo``, ``linearization`` and ``trim``.  ``save_figure`` writes every PNG.
+``montecarlo``, ``linearization``, ``trim`` and ``tune``.  ``save_figure`` writes every PNG.
 
 May import the base modules, ``config``, ``files`` and ``bridge``; imported by
 ``run`` and the analysis rooms.
