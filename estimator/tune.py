@@ -88,6 +88,7 @@ class Fit:
 
 RIDGE = 0.1   # scale-metric floor: a direction without information moves like one of σ = 3
 MAX_RADIUS = 12.0   # a factor e¹² = 1.6e5 in one step
+FAR_GAIN = 5.0      # a predicted gain in ln L above which longer steps are tried
 
 
 STEP_IN_SIGMA = 0.1   # converged once the next step is within 0.1 σ in every ln θ
@@ -197,11 +198,12 @@ def maximize(lik: Likelihood, theta0, lower, upper, *, tol: float = 0.05,
             trial = lik.evaluate(np.exp(_with(lam, active, step)))
             passes["likelihood"] += 1
             rho = (trial.loglik - sub.loglik) / predicted
-            if rho > 0.75:
-                # The model holds out to the step: try twice as far along it, and
-                # again, before paying for a score pass (the start is often many
-                # factors of e from the optimum, and the expected information
-                # overstates the curvature where a noise parameter heads for zero).
+            if rho > 0.75 and predicted > FAR_GAIN:
+                # Far from the maximum and the model holds out to the step: try twice
+                # as far along it, and again, before paying for a score pass (the
+                # start is often many factors of e from the optimum, and the expected
+                # information overstates the curvature where a noise parameter heads
+                # for zero).  Near the maximum it would only cost passes.
                 direction = step
                 for scale in (2.0, 4.0, 8.0):
                     longer = np.clip(lam[active] + scale * direction, lo[active],
@@ -216,6 +218,8 @@ def maximize(lik: Likelihood, theta0, lower, upper, *, tol: float = 0.05,
                 radius = min(max(radius, 2 * np.abs(step).max()), MAX_RADIUS)
             elif rho < 0.25:
                 radius = radius / 4
+            elif rho > 0.75:
+                radius = min(max(radius, 2 * np.abs(step).max()), MAX_RADIUS)
             if trial.loglik > sub.loglik:
                 lam = _with(lam, active, step)
                 sub = lik.score(np.exp(lam), active)
@@ -237,7 +241,10 @@ def maximize(lik: Likelihood, theta0, lower, upper, *, tol: float = 0.05,
             converged = it < max_iter
             break
         active = new_active
-    return Fit(np.exp(lam), np.exp(lo), np.exp(hi), ev, start, it, converged, passes, path)
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    # At a bound, the bound itself (exp(ln b) is b only to the last bit or two).
+    theta = np.where(lam <= lo, lower, np.where(lam >= hi, upper, np.exp(lam)))
+    return Fit(theta, lower, upper, ev, start, it, converged, passes, path)
 
 
 def _with(lam: np.ndarray, idx: np.ndarray, step: np.ndarray) -> np.ndarray:

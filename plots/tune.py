@@ -20,18 +20,21 @@ def plot_tune(profiles: dict, nis_hourly: dict, nis_bounds: dict, rho: dict, lag
               pairs: dict, title: str):
     """Three panels.
 
-    ``profiles``: name -> (ln θ/θ̂ offsets, Δln L, σ of ln θ), drawn against the
-    quadratic −½(Δ/σ)² of the information.  ``nis_hourly``: setting ("scenario" or
-    "tuned") -> kind -> (hours, mean NIS), with ``nis_bounds`` kind -> (lo, hi) of one
-    hour's mean.  ``rho``: setting -> kind -> ρ(k) at lags k·``lag_s``, with the
-    ±1.96/√N band from ``pairs`` (kind -> N)."""
+    ``profiles``: name -> (ln θ/θ̂ offsets, Δln L, σ of ln θ), drawn with the parabola
+    through them against the quadratic −½(Δ/σ)² of the information.  ``nis_hourly``:
+    setting ("scenario" or "tuned") -> kind -> (hours, mean NIS), with ``nis_bounds``
+    kind -> (lo, hi) of one hour's mean.  ``rho``: setting -> kind -> ρ(k) at lags
+    k·``lag_s``, with the ±1.96/√N band from ``pairs`` (kind -> N)."""
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.6), constrained_layout=True)
     ax = axes[0]
     x = np.linspace(-2.5, 2.5, 101)
     ax.plot(x, -0.5 * x**2, color="0.6", lw=1.0, label="quadratic (Fisher information)")
     for k, (name, (dl, dll, s)) in enumerate(profiles.items()):
-        ax.plot(np.r_[dl[:1] / s, 0.0, dl[1:] / s], np.r_[dll[:1], 0.0, dll[1:]], "o-",
-                color=f"C{k}", ms=5, label=f"{name} (σ of ln θ {s:.2g})")
+        xs, ys = np.r_[dl / s, 0.0], np.r_[dll, 0.0]
+        ax.plot(xs, ys, "o", color=f"C{k}", ms=6, label=f"{name} (σ of ln θ {s:.2g})")
+        if len(xs) >= 3:   # the parabola through the points: the likelihood's own curvature
+            c = np.polyfit(xs, ys, 2)
+            ax.plot(x, np.polyval(c, x), color=f"C{k}", lw=1.0, ls="--")
     ax.axhline(-1.92, color="0.3", ls=":", lw=0.8, label="95% (Δln L = −1.92)")
     ax.set_xlabel("ln θ − ln θ̂, in σ")
     ax.set_ylabel("ln L − max ln L")

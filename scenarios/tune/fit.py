@@ -207,7 +207,8 @@ def _entries(lik: Likelihood, fit: Fit, names: list[str], start: np.ndarray
 
 
 COARSE = 8   # every 8th sample (4.1 s): 42 per nutation period
-MAX_PROFILES = 3
+MAX_PROFILES = 2
+COARSE_TOL = 0.5   # the coarse maximum need only be near: the full likelihood finishes
 
 
 def _likelihood(src: TuneSource, opts: TuneOptions, every: int) -> Likelihood:
@@ -249,11 +250,12 @@ def tune(src: TuneSource, opts: TuneOptions) -> TuneResult:
     # off, on every COARSE-th sample (a filter stepping COARSE times as far, a pass
     # COARSE times cheaper), then the maximum of the full telemetry's likelihood from
     # there, which is near: the same model, a fraction of its data.
-    coarse = maximize(_likelihood(src, opts, COARSE), start, bounds[:, 0], bounds[:, 1])
+    coarse = maximize(_likelihood(src, opts, COARSE), start, bounds[:, 0], bounds[:, 1],
+                      tol=COARSE_TOL)
     fit = maximize(lik, coarse.theta, bounds[:, 0], bounds[:, 1])
     entries, applied, limit_passes = _entries(lik, fit, names, start)
     # The likelihood at ±2σ along the determined parameters, the least certain first
-    # (where the quadratic of the information is likeliest to fail), at most three.
+    # (where the quadratic of the information is likeliest to fail), at most two.
     determined = [j for j, n in enumerate(names) if entries[n]["status"] == "determined"]
     profiles = {names[j]: profile(lik, fit, j, offsets=(-2.0, 2.0)) for j in
                 sorted(determined, key=lambda j: -fit.sigma_log[j])[:MAX_PROFILES]}
