@@ -176,6 +176,10 @@ def main() -> None:
     if only:
         # `python benchmarks/run.py discretize_ms run_figures_2day_s`: just those.
         for name in only:
+            if name == "tune_figures":
+                for key, value, unit in tune_figures():
+                    report(key, value, unit)
+                continue
             if name == "run_365day":
                 for (key, unit), value in zip(YEAR_FIGURES, run_365day(), strict=True):
                     report(key, value, unit)
@@ -234,6 +238,8 @@ def main() -> None:
         for (key, unit), value in zip(YEAR_FIGURES, run_365day(), strict=True):
             report(key, value, unit)
     report("run_figures_2day_s", run_figures_2day_s(), "s")
+    for key, value, unit in tune_figures():
+        report(key, value, unit)
     k = 5000  # the plain-numpy loop, for comparison, scaled to a day
     part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,
                         1.5e-7)
@@ -254,6 +260,49 @@ def main() -> None:
                       dashboard_address=None) as cluster:
         report("montecarlo_dask_100x2day_wall_s",
                montecarlo_wall_s("--scheduler", cluster.scheduler_address), "s")
+
+
+TUNE_SCENARIOS = ("goes_next_paper_torques", "goes_next_equinox")
+
+
+def tune_figures() -> list[tuple[str, float, str]]:
+    """Issue 28: `dynprop tune` on two days of telemetry.  ``tune_2day_s`` is the
+    whole command (reading telemetry.csv, the fit, the report and its figure) on a
+    run of `goes_next_paper_torques`, the paper's own torque assumption, which is what
+    tuning is for; ``tune_over_filter`` is the fit on the telemetry in memory
+    (``scenarios.tune.fit.tune``: the maximum, the limits, the before/after
+    diagnostics) over one pass of the paper's filter (``kalman_filter``, as `run` and
+    `estimate` call it) over the same telemetry, medians taken in turn.  The
+    default scenario, whose truth lies outside the filter's noise model (its
+    likelihood is flat along most parameters), gets its ratio too."""
+    from dynprop.estimator.kalman import kalman_filter
+    from dynprop.estimator.transition import discretize
+    from dynprop.scenarios.tune.fit import TuneOptions, tune
+    from dynprop.scenarios.tune.source import read_source
+    exe = str(Path(sys.executable).with_name("dynprop"))
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in TUNE_SCENARIOS:
+            run = Path(tmp) / name
+            subprocess.run([exe, "run", name, "--out", str(run)], check=True,
+                           capture_output=True)
+            if name == TUNE_SCENARIOS[0]:
+                out.append(("tune_2day_s", median_time(lambda run=run: subprocess.run(
+                    [exe, "tune", str(run)], check=True, capture_output=True), repeats=3),
+                    "s"))
+            src = read_source(run)
+            disc = discretize(src.params, src.noise, src.scenario.sample_interval_s)
+            fit_t, filter_t = [], []
+            tune(src, TuneOptions())
+            for _ in range(3):
+                fit_t.append(median_time(lambda src=src: tune(src, TuneOptions()), 1, 0))
+                filter_t.append(median_time(lambda src=src, disc=disc: kalman_filter(
+                    src.meas, disc, src.x0, src.P0, u=src.u), 3, 1))
+            ratio = statistics.median(fit_t) / statistics.median(filter_t)
+            key = "tune_over_filter" if name == TUNE_SCENARIOS[0] else \
+                "tune_equinox_over_filter"
+            out.append((key, ratio, "x"))
+    return out
 
 
 def montecarlo_wall_s(*extra: str, runs: int = 100, repeats: int = 2) -> float:
