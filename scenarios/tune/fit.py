@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -165,37 +166,37 @@ def diagnostics(lik: Likelihood, theta, src: TuneSource, noise: ProcessNoise,
     return Diagnostics(ll, nis, white, rho, hourly, _sigma_yaw(src, noise, roll_factor))
 
 
-def _entries(lik: Likelihood, fit: Fit, names: list[str], start: np.ndarray
-             ) -> tuple[dict, np.ndarray, int]:
+def _status(fit: Fit, j: int) -> str:
+    s, bound = float(fit.sigma_log[j]), int(fit.at_bound[j])
+    if bound:
+        return "at lower bound" if bound < 0 else "at upper bound"
+    if s <= DETERMINED_SIGMA:
+        return "determined"
+    return "weakly determined" if s <= WEAK_SIGMA else "not determined"
+
+
+ESTIMATED = ("determined", "weakly determined")
+
+
+def _entries(fit: Fit, names: list[str], start: np.ndarray, limits: dict
+             ) -> tuple[dict, np.ndarray]:
     """What each estimate is worth and the value the filter is given: the estimate
     where the telemetry informs it (σ of ln θ ≤ 3, within a factor of 20); else the
     scenario's value if the telemetry allows it (95%), or the allowed value nearest
-    it: a one-sided limit (``estimator.tune.nearest_allowed``)."""
+    it, a one-sided limit (``limits``: index → ``estimator.tune.nearest_allowed``)."""
     sigma_ln = fit.sigma_log
-    out, applied, passes = {}, start.copy(), 0
+    out, applied = {}, start.copy()
     for j, name in enumerate(names):
-        value, s = float(fit.theta[j]), float(sigma_ln[j])
-        bound = int(fit.at_bound[j])
-        if bound < 0:
-            status = "at lower bound"
-        elif bound > 0:
-            status = "at upper bound"
-        elif s <= DETERMINED_SIGMA:
-            status = "determined"
-        elif s <= WEAK_SIGMA:
-            status = "weakly determined"
-        else:
-            status = "not determined"
+        value, s, status = float(fit.theta[j]), float(sigma_ln[j]), _status(fit, j)
         limit = side = None
-        if status in ("determined", "weakly determined"):
+        if status in ESTIMATED:
             applied[j] = value
         else:
-            applied[j], allowed, k = nearest_allowed(lik, fit, j, float(start[j]))
-            passes += k
+            applied[j], allowed, _ = limits[j]
             if not allowed:
                 limit, side = float(applied[j]), ("upper" if start[j] > value else "lower")
         finite = np.isfinite(s)
-        estimated = status in ("determined", "weakly determined") or bound != 0
+        estimated = status in ESTIMATED or fit.at_bound[j] != 0
         out[name] = {"value": value if estimated else None,
                      "sigma": value * s if finite and estimated else None,
                      "sigma_ln": s if finite else None, "status": status,
@@ -203,7 +204,7 @@ def _entries(lik: Likelihood, fit: Fit, names: list[str], start: np.ndarray
                      "scenario_allowed": None if estimated else limit is None,
                      "start": float(start[j]), "applied": float(applied[j]),
                      "bounds": [float(fit.lower[j]), float(fit.upper[j])]}
-    return out, applied, passes
+    return out, applied
 
 
 COARSE = 8   # every 8th sample (4.1 s): 42 per nutation period
@@ -246,23 +247,40 @@ def tune(src: TuneSource, opts: TuneOptions) -> TuneResult:
     names = list(groups) + ([ROLL] if opts.roll_variance else [])
     start = model.theta_of(src.noise)
     bounds = np.array([opts.bound(n) for n in names], dtype=float)
+    pool = ThreadPoolExecutor(2)
+    # The scenario's noise's innovations do not wait for the fit: on the other core.
+    before = pool.submit(diagnostics, lik, start, src, src.noise, 1.0)
     # Coarse to fine: the climb from the scenario's noise, often orders of magnitude
     # off, on every COARSE-th sample (a filter stepping COARSE times as far, a pass
     # COARSE times cheaper), then the maximum of the full telemetry's likelihood from
     # there, which is near: the same model, a fraction of its data.
-    coarse = maximize(_likelihood(src, opts, COARSE), start, bounds[:, 0], bounds[:, 1],
-                      tol=COARSE_TOL)
-    fit = maximize(lik, coarse.theta, bounds[:, 0], bounds[:, 1])
-    entries, applied, limit_passes = _entries(lik, fit, names, start)
+    try:
+        coarse = maximize(_likelihood(src, opts, COARSE), start, bounds[:, 0],
+                          bounds[:, 1], tol=COARSE_TOL)
+        fit = maximize(lik, coarse.theta, bounds[:, 0], bounds[:, 1])
+    except BaseException:
+        pool.shutdown(cancel_futures=True)
+        raise
+    # What follows the maximum is passes independent of one another (each parameter's
+    # limit, each profile): two at a time, on both cores (the compiled loop lets go of
+    # the GIL), each the same pass as alone.
+    unknown = [j for j in range(len(names)) if _status(fit, j) not in ESTIMATED]
+    determined = [j for j in range(len(names)) if _status(fit, j) == "determined"]
     # The likelihood at ±2σ along the determined parameters, the least certain first
     # (where the quadratic of the information is likeliest to fail), at most two.
-    determined = [j for j, n in enumerate(names) if entries[n]["status"] == "determined"]
-    profiles = {names[j]: profile(lik, fit, j, offsets=(-2.0, 2.0)) for j in
-                sorted(determined, key=lambda j: -fit.sigma_log[j])[:MAX_PROFILES]}
-    roll_factor = float(applied[-1]) if opts.roll_variance else 1.0
-    tuned = model.process_noise(applied)
-    before = diagnostics(lik, start, src, src.noise, 1.0)
-    after = diagnostics(lik, applied, src, tuned, roll_factor)
+    shown = sorted(determined, key=lambda j: -fit.sigma_log[j])[:MAX_PROFILES]
+    with pool:
+        limits = {j: pool.submit(nearest_allowed, lik, fit, j, float(start[j]))
+                  for j in unknown}
+        profiles = {names[j]: pool.submit(profile, lik, fit, j, (-2.0, 2.0)) for j in shown}
+        limits = {j: f.result() for j, f in limits.items()}
+        entries, applied = _entries(fit, names, start, limits)
+        roll_factor = float(applied[-1]) if opts.roll_variance else 1.0
+        tuned = model.process_noise(applied)
+        after = pool.submit(diagnostics, lik, applied, src, tuned, roll_factor)
+        before, after = before.result(), after.result()
+        profiles = {k: f.result() for k, f in profiles.items()}
+    limit_passes = sum(k for _, _, k in limits.values())
     passes = {"coarse": {"every": COARSE, **coarse.passes}, "score": fit.passes["score"],
               "directions": fit.passes["directions"],
               "likelihood": fit.passes["likelihood"] + limit_passes + 2 * len(profiles) + 2}
