@@ -93,7 +93,7 @@ def pack_params(disc, Qd_unit=None) -> np.ndarray:
 def sequential_update(x, P, z, m, r, trace: list | None = None):
     """The scalar updates of roll, yaw and h in turn (Eqs. 36–38), each in Joseph form
     (Eq. 37); returns the updated x, P and each measurement's innovation ν and its
-    variance S.  Shared by the filter's step and the likelihood's (``likelihood``),
+    variance S.  Shared by the filter's step and the likelihood's (``likelihood_steps``),
     which takes each update's P before it and gain K from ``trace``."""
     eye = ca.SX.eye(N_STATES)
     nus, ss = [], []
