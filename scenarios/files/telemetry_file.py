@@ -11,6 +11,7 @@ is the same thing: every other sample missing.  A dropout longer than
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,6 +56,21 @@ class GriddedTelemetry:
                 "missing_steps": int(missing.sum()), "dropouts": int(len(lengths)),
                 "longest_dropout_s": float(lengths.max(initial=0.0)),
                 "median_cadence_s": float(np.median(steps)) if steps.size else None}
+
+
+def run_telemetry(run_dir: Path) -> Path | None:
+    """The telemetry a run directory filtered: its telemetry.csv, else the file a
+    `dynprop estimate` directory names in its summary.json; None if neither is there
+    (a run longer than two days writes telemetry.csv only with output.telemetry: true)."""
+    own = Path(run_dir) / "telemetry.csv"
+    if own.is_file():
+        return own
+    summary = Path(run_dir) / "summary.json"
+    if summary.is_file():
+        named = (json.loads(summary.read_text()).get("telemetry") or {}).get("file")
+        if named and Path(named).is_file():
+            return Path(named)
+    return None
 
 
 def read_input_csv(path: Path, kind: str) -> dict[str, np.ndarray]:

@@ -28,16 +28,12 @@ from .batch import (
 def telemetry_path(run_dir: Path, given: Path | None) -> Path:
     """The telemetry the batch filter reads: ``given``, else the run's telemetry.csv,
     else the file a `dynprop estimate` directory names in its summary."""
+    from ..files.telemetry_file import run_telemetry
     if given is not None:
         return given
-    own = run_dir / "telemetry.csv"
-    if own.is_file():
-        return own
-    summary = run_dir / "summary.json"
-    if summary.is_file():
-        named = (json.loads(summary.read_text()).get("telemetry") or {}).get("file")
-        if named and Path(named).is_file():
-            return Path(named)
+    found = run_telemetry(run_dir)
+    if found is not None:
+        return found
     raise TrimError(f"{run_dir}: no telemetry.csv (a run longer than 2 days writes it only "
                     "with output.telemetry: true); give one with --telemetry FILE")
 

@@ -5,7 +5,6 @@ reads (``bridge.inputs``); and why it may be too little to tune on."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from ..config.estimation import QUARTER_ORBIT_S
 from ..config.loader import load_scenario
 from ..config.schema import Scenario
 from ..files.rundir import RunDirError
+from ..files.telemetry_file import run_telemetry
 from ..units import DAY_S
 
 ORBIT_S = 86164.0905
@@ -61,14 +61,9 @@ class TuneSource:
 
 
 def _run_telemetry(run_dir: Path) -> Path:
-    own = run_dir / "telemetry.csv"
-    if own.is_file():
-        return own
-    summary = run_dir / "summary.json"
-    if summary.is_file():
-        named = (json.loads(summary.read_text()).get("telemetry") or {}).get("file")
-        if named and Path(named).is_file():
-            return Path(named)
+    found = run_telemetry(run_dir)
+    if found is not None:
+        return found
     raise TuneError(f"{run_dir}: no telemetry.csv to tune on (a run longer than 2 days "
                     "writes it only with output.telemetry: true: rerun with --set "
                     "output.telemetry=true)")
