@@ -161,13 +161,14 @@ def tune(source, scenario: Scenario | str | None = None, params=None, tie_xz: bo
     from dynprop.scenarios.tune.fit import TuneOptions
     from dynprop.scenarios.tune.report import run_tune
     path = getattr(source, "path", source)
-    if scenario is not None and not isinstance(scenario, str | Path):
-        owner_s = Path(tempfile.mkdtemp(prefix="dynprop-scenario-"))
-        (owner_s / "scenario.yaml").write_text(str(scenario))
-        scenario = owner_s / "scenario.yaml"
     kw = {} if params is None else {"params": tuple(params)}
     options = TuneOptions(tie_xz=tie_xz, roll_variance=roll_variance,
                           bounds=dict(bounds or {}), **kw)
     owner, out = _temporary("tune")
+    if scenario is not None and not isinstance(scenario, str | Path):
+        # A Scenario object goes to the loader as its resolved YAML, in the result's
+        # own temporary directory (removed with it).
+        (owner / "scenario.yaml").write_text(str(scenario))
+        scenario = owner / "scenario.yaml"
     run_tune(Path(path), scenario, [], out, options, force=False)
     return TuneResult(out, owner)

@@ -58,7 +58,9 @@ def report_dict(r: TuneResult, command: str | None = None) -> dict:
                       "updates": {k: int(np.isfinite(v).sum()) for k, v in
                                   (("roll", src.meas.roll_rad), ("yaw", src.meas.yaw_rad),
                                    ("h", src.meas.h_Nms))},
-                      "sun_gap_h": src.gap_s() / 3600},
+                      "sun_gap_h": src.gap_s() / 3600,
+                      # The periodic covariance's gap: measured, or the paper's 8 h.
+                      "sun_gap_measured": src.measured_gap_s() is not None},
         "method": {"estimator": "maximum likelihood of the paper filter's innovations "
                                 "(prediction-error decomposition), Fisher scoring in ln θ",
                    "tuned": r.names, "tied_xz": r.options.tie_xz,
@@ -100,10 +102,11 @@ def _g(v) -> str:
 
 def report_md(d: dict) -> str:
     t = d["telemetry"]
+    gap = "" if t["sun_gap_measured"] else " (no whole gap in the file: the paper's)"
     lines = [f"# Noise tuned from the telemetry: {d['scenario']}", "",
              f"Telemetry {t['file']}: {t['span_h']:.1f} h, {t['updates']['roll']} roll, "
              f"{t['updates']['yaw']} yaw and {t['updates']['h']} h updates; Sun gap "
-             f"{t['sun_gap_h']:.1f} h.  Maximum likelihood of the paper filter's "
+             f"{t['sun_gap_h']:.1f} h{gap}.  Maximum likelihood of the paper filter's "
              "innovations (docs/tune.md), no truth used.", "",
              "| parameter | scenario | estimate | σ | status | 95% limit | used |",
              "|---|---|---|---|---|---|---|"]

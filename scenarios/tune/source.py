@@ -22,6 +22,7 @@ from ..files.telemetry_file import run_telemetry
 from ..units import DAY_S
 
 ORBIT_S = 86164.0905
+PAPER_GAP_S = 8 * 3600.0   # Section 5: "one-third of an orbit, or 8 hours"
 
 
 class TuneError(ValueError):
@@ -49,15 +50,20 @@ class TuneSource:
     def span_s(self) -> float:
         return float(self.t_s[-1] - self.t_s[0])
 
-    def gap_s(self) -> float:
-        """The mean length of the Sun gaps (yaw outages of at least
-        ``estimator.sun_gap_min_h``), or 8 h (the paper's) if there is none."""
+    def measured_gap_s(self) -> float | None:
+        """The mean length of the Sun gaps the telemetry shows (yaw outages of at
+        least ``estimator.sun_gap_min_h``, both ends inside it), or None."""
         from ..samples import sun_gaps
         dt = self.scenario.sample_interval_s
         gaps = sun_gaps(np.isfinite(self.meas.yaw_rad), dt,
                         self.scenario.estimator.sun_gap_min_h)
         lengths = [(b - a) * dt for a, b in gaps if 0 < a and b < len(self.t_s)]
-        return float(np.mean(lengths)) if lengths else 8 * 3600.0
+        return float(np.mean(lengths)) if lengths else None
+
+    def gap_s(self) -> float:
+        """``measured_gap_s``, or the paper's 8 h for telemetry without a whole gap."""
+        measured = self.measured_gap_s()
+        return PAPER_GAP_S if measured is None else measured
 
 
 def _run_telemetry(run_dir: Path) -> Path:
