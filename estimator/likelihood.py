@@ -75,15 +75,6 @@ class NoiseModel:
     def n(self) -> int:
         return self.n_q + int(self.roll)
 
-    def q_w(self, theta) -> float:
-        """The wheel-torque density q_w at θ."""
-        theta = np.asarray(theta, dtype=float)
-        return self.fixed.q_w * (1 - self._tuned("q_w")) + sum(
-            g.get("q_w", 0.0) * theta[j] for j, g in enumerate(self.groups))
-
-    def _tuned(self, key: str) -> bool:
-        return any(key in g for g in self.groups)
-
     def Qd(self, theta) -> np.ndarray:
         """Q_d(θ) = Q_fixed + Σ θ_j U_j."""
         theta = np.asarray(theta, dtype=float)[:self.n_q]
