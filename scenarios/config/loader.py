@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 import typing
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,7 @@ from pydantic import BaseModel, ValidationError
 
 from .montecarlo import DISTRIBUTION_TAGS, Normal, Uniform
 from .schema import Scenario
-from .suggestions import cap_lines, did_you_mean
+from .suggestions import cap_lines, did_you_mean, shown
 
 
 class ScenarioError(ValueError):
@@ -94,6 +95,12 @@ def _parse_yaml(text: str, where: str) -> Any:
 
 def read_raw(source: str | Path) -> tuple[dict, str]:
     """The raw mapping of a scenario file or bundled name, and where it came from."""
+    raw, where, _ = _read_source(source)
+    return raw, where
+
+
+def _read_source(source: str | Path) -> tuple[dict, str, str]:
+    """``read_raw``, and the file's text (for the line of each key in messages)."""
     path = Path(source)
     if not path.exists() and str(source) in bundled_names():
         path = bundled_dir() / f"{source}.yaml"
@@ -110,7 +117,7 @@ def read_raw(source: str | Path) -> tuple[dict, str]:
         raw = {}
     if not isinstance(raw, dict):
         raise ScenarioError(f"{path}: the top level must be a mapping of keys")
-    return raw, str(path)
+    return raw, str(path), text
 
 
 def apply_override(raw: dict, assignment: str) -> None:
@@ -159,67 +166,224 @@ def _model_at(loc: tuple) -> type[BaseModel] | None:
     return model if isinstance(model, type) and issubclass(model, BaseModel) else None
 
 
-def problem_lines(exc: ValidationError) -> list[str]:
-    """One line per problem key, each starting with its key path; an unknown key
-    names the closest valid key at the same place.  A vector or matrix with several
-    bad elements is one problem: its first element is shown, with the count."""
+@dataclass(frozen=True)
+class Sources:
+    """Where each key's value came from, for messages: the scenario file (with the
+    line of each key) or a ``--set``, the later overrides winning."""
+
+    path: str | None = None
+    lines: dict[tuple, int] = field(default_factory=dict)
+    overrides: tuple[tuple[tuple, str], ...] = ()
+
+    def of(self, keys: tuple) -> str | None:
+        for set_keys, text in reversed(self.overrides):
+            n = min(len(set_keys), len(keys))
+            if set_keys[:n] == keys[:n]:
+                return f"--set {text}"
+        if self.path is None:
+            return None
+        line = next((self.lines[keys[:k]] for k in range(len(keys), 0, -1)
+                     if keys[:k] in self.lines), None)
+        return self.path if line is None else f"{self.path}:{line}"
+
+
+def key_lines(text: str) -> dict[tuple, int]:
+    """The line (from 1) of every mapping key of a YAML text, by its key path."""
+    try:
+        root = yaml.compose(text, Loader=_Loader)
+    except yaml.YAMLError:
+        return {}
+    lines: dict[tuple, int] = {}
+
+    def walk(node, prefix: tuple) -> None:
+        if isinstance(node, yaml.MappingNode):
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode):
+                    lines.setdefault(prefix + (key.value,), key.start_mark.line + 1)
+                    walk(value, prefix + (key.value,))
+    walk(root, ())
+    return lines
+
+
+def _value_at(raw, keys: tuple):
+    node = raw
+    for key in keys:
+        if not isinstance(node, dict) or key not in node:
+            return _ABSENT
+        node = node[key]
+    return node
+
+
+_ABSENT = object()
+
+
+def _shape(annotation) -> str | None:
+    """A vector or matrix field's shape in the user's words ("a list of 3 numbers")."""
+    if typing.get_origin(annotation) is typing.Annotated:
+        annotation = typing.get_args(annotation)[0]
+    if typing.get_origin(annotation) is not tuple:
+        return None
+    args = typing.get_args(annotation)
+    inner = _shape(args[0])
+    if inner is None:
+        return f"a list of {len(args)} numbers"
+    m = int(inner.split()[3])
+    return f"a {len(args)}×{m} matrix, a list of {len(args)} lists of {m} numbers"
+
+
+def _field_shape(keys: tuple) -> str | None:
+    model = _model_at(keys)
+    if model is None or keys[-1] not in model.model_fields:
+        return None
+    return _shape(model.model_fields[keys[-1]].annotation)
+
+
+def _bool_words(text: str) -> str:
+    # pydantic prints Python's True and False; YAML writes true and false.
+    return re.sub(r"\bTrue\b", "true", re.sub(r"\bFalse\b", "false", text))
+
+
+# What a value must be, by pydantic error type, in the scenario's own terms.
+EXPECTED = {
+    "float_type": "must be a number", "float_parsing": "must be a number",
+    "int_type": "must be a whole number", "int_from_float": "must be a whole number",
+    "int_parsing": "must be a whole number", "bool_type": "must be true or false",
+    "bool_parsing": "must be true or false",
+    "string_type": "must be text (quote it if it looks like a number)",
+    "dict_type": "must be a mapping of keys, each key: value",
+    "model_type": "must be a section, a mapping of keys, each key: value",
+    "model_attributes_type": "must be a mapping of keys, each key: value",
+    "list_type": "must be a list", "tuple_type": "must be a list",
+    "finite_number": "must be a finite number (not .nan or .inf)",
+    "string_too_short": "must not be empty",
+}
+_BOUNDS = {"greater_than": ("gt", "must be greater than {}"),
+           "greater_than_equal": ("ge", "must be at least {}"),
+           "less_than": ("lt", "must be less than {}"),
+           "less_than_equal": ("le", "must be at most {}")}
+
+
+def _message(error: dict, keys: tuple, in_union: bool) -> tuple[str, bool]:
+    """What is wrong, in the field's terms, and whether to echo the value."""
+    kind, ctx = error["type"], error.get("ctx") or {}
+    if kind == "extra_forbidden":
+        model = _model_at(error["loc"])
+        return "unknown key" + (did_you_mean(str(keys[-1]), model.model_fields)
+                                if model is not None else ""), False
+    if kind == "missing" and not isinstance(error["loc"][-1], int):
+        return "required key is missing", False
+    if kind.startswith("union_tag"):
+        return ("distribution must be 'normal' or 'uniform'" if kind == "union_tag_invalid"
+                else "needs a distribution: normal or uniform"), True
+    if in_union and kind in ("float_type", "tuple_type", "missing", "too_short",
+                             "too_long"):
+        # A dispersion parameter: a number, or a vector or matrix of the key's shape.
+        return "must be a number, or a list of 3 numbers or a 3×3 matrix as the dispersed " \
+               "key", True
+    shape = _field_shape(keys) if keys else None
+    if shape is not None and kind != "value_error":
+        finite = " finite" if kind == "finite_number" else ""
+        return f"must be {shape.replace(' numbers', finite + ' numbers')}", True
+    if kind in _BOUNDS:
+        name, text = _BOUNDS[kind]
+        bound = ctx.get(name)
+        return text.format(f"{bound:g}" if isinstance(bound, int | float) else bound), True
+    if kind in ("literal_error", "enum"):
+        return f"must be {_bool_words(str(ctx.get('expected', '')))}", True
+    if kind in ("too_short", "too_long"):
+        n = ctx.get("min_length" if kind == "too_short" else "max_length")
+        return f"must have {'at least' if kind == 'too_short' else 'at most'} {n} " \
+               f"item{'s' if n != 1 else ''}", True
+    if kind in EXPECTED:
+        return EXPECTED[kind], True
+    msg = error["msg"].removeprefix("Value error, ").replace("Input should be", "must be")
+    return _bool_words(msg), True
+
+
+def problem_lines(exc: ValidationError, raw: dict | None = None,
+                  sources: Sources | None = None) -> list[str]:
+    """One line per problem key, each starting with its key path and saying what the
+    value must be in the scenario's terms (a list of 3 numbers, a whole number, ...),
+    then the value given and where it came from (``sources``: the file and line, or
+    the ``--set``).  An unknown key names the closest valid key at the same place.  A
+    vector or matrix with several bad elements is one problem."""
     lines: dict[str, list[str]] = {}
+    tails: dict[str, str] = {}
     for error in exc.errors():
         # Union labels in a dispersion's loc ("...normal.sigma.float") are not keys
         # the user wrote; a union gives one error per alternative, keep the first.
+        in_union = any(_union_label(p) and p not in DISTRIBUTION_TAGS for p in error["loc"])
         loc = tuple(p for p in error["loc"] if not _union_label(p))
         first_int = next((i for i, p in enumerate(loc) if isinstance(p, int)), len(loc))
-        where = ".".join(str(p) for p in loc[:first_int])
+        keys = loc[:first_int]
+        where = ".".join(str(p) for p in keys)
         index = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc[first_int:])
-        msg = error["msg"].removeprefix("Value error, ")
-        if error["type"] == "extra_forbidden":
-            model = _model_at(error["loc"])
-            msg = "unknown key" + (did_you_mean(str(loc[-1]), model.model_fields)
-                                   if model is not None else "")
-        elif error["type"] == "missing":
-            msg = "missing value (wrong length)" if isinstance(error["loc"][-1], int) \
-                else "required key is missing"
+        msg, echo = _message(error, keys, in_union)
         if not where:
             # Whole-scenario checks (the Monte Carlo keys) name their key paths
             # themselves, one line each.
             for line in msg.splitlines():
                 lines.setdefault(line if ": " in line else f"scenario: {line}", [])
             continue
-        lines.setdefault(where, []).append(f"{msg} at {index}" if index else msg)
+        if index and "list of" not in msg:   # not a message on the whole vector's shape
+            msg = f"{msg} at {index}"
+        if msg not in lines.setdefault(where, []):
+            lines[where].append(msg)
+        tails.setdefault(where, _tail(keys, echo, raw, error, sources))
     out = []
     for where, msgs in lines.items():
         if not msgs:
             out.append(where)
             continue
         more = len(msgs) - 1
-        out.append(f"{where}: {msgs[0]}" + (f" (and {more} more in this value)" if more else ""))
+        out.append(f"{where}: {msgs[0]}" + (f" (and {more} more in this value)" if more else "")
+                   + tails[where])
     return out
 
 
-def format_error(exc: ValidationError) -> str:
+def _tail(keys: tuple, echo: bool, raw, error: dict, sources: Sources | None) -> str:
+    """", got VALUE (FILE:LINE)": the value as given and where it came from (a
+    ``--set`` of this very key shows the value itself)."""
+    source = sources.of(keys) if sources is not None else None
+    value = _value_at(raw, keys) if raw is not None else _ABSENT
+    if value is _ABSENT and "input" in error and not isinstance(error["loc"][-1], int):
+        value = error["input"]
+    if error["type"] == "union_tag_invalid":
+        value = (error.get("ctx") or {}).get("tag", value)
+    exact_set = source is not None and source.startswith(f"--set {'.'.join(keys)}=")
+    got = f", got {shown(value)}" if echo and value is not _ABSENT and not exact_set else ""
+    return got + (f" ({source})" if source else "")
+
+
+def format_error(exc: ValidationError, raw: dict | None = None,
+                 sources: Sources | None = None) -> str:
     """Every problem, one line each (at most MAX_PROBLEM_LINES)."""
-    return "\n".join(cap_lines(problem_lines(exc)))
+    return "\n".join(cap_lines(problem_lines(exc, raw, sources)))
 
 
-def validate(raw: dict) -> Scenario:
+def validate(raw: dict, sources: Sources | None = None) -> Scenario:
     try:
         return Scenario.model_validate(raw)
     except ValidationError as exc:
-        raise ScenarioError(format_error(exc)) from None
+        raise ScenarioError(format_error(exc, raw, sources)) from None
 
 
 def load_scenario(source: str | Path, overrides: list[str] = ()) -> Scenario:
     """The validated scenario with ``key.path=value`` overrides applied in order.
-    Every problem of the file and of the overrides is reported together."""
-    raw, _ = read_raw(source)
+    Every problem of the file and of the overrides is reported together, each with
+    the value given and the file line or ``--set`` it came from."""
+    raw, path, text = _read_source(source)
     problems: list[str] = []
+    applied = []
     for assignment in overrides:
         try:
             apply_override(raw, assignment)
+            applied.append((tuple(assignment.split("=", 1)[0].strip().split(".")),
+                            assignment))
         except ScenarioError as exc:
             problems += exc.problems
     try:
-        scenario = validate(raw)
+        scenario = validate(raw, Sources(path, key_lines(text), tuple(applied)))
     except ScenarioError as exc:
         problems += exc.problems
     if problems:

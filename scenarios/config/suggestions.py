@@ -33,3 +33,16 @@ def cap_lines(lines: list[str], limit: int = MAX_PROBLEM_LINES) -> list[str]:
         return lines
     more = len(lines) - (limit - 1)
     return lines[:limit - 1] + [f"... and {more} more problems"]
+
+
+def shown(value, limit: int = 60) -> str:
+    """A value as the user wrote it in YAML (flow style: ``[1, 2]``, ``.nan``, ``true``),
+    cut to ``limit`` characters."""
+    import yaml
+    try:
+        text = yaml.safe_dump(value, default_flow_style=True, width=10**6,
+                              allow_unicode=True).strip()
+    except yaml.YAMLError:
+        text = repr(value)
+    text = text.removesuffix("...").strip()
+    return text if len(text) <= limit else text[:limit - 1] + "…"

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..workers import ignore_sigint, sigint_held, worker_pool
 from .columns import decimals_of
+from .rundir import names_file
 
 FMT = "%.10g"
 BLOCK_ROWS = 40_000
@@ -116,7 +117,7 @@ def write_csv(path: Path | str, columns: dict[str, np.ndarray], workers: int | N
     # Fork keeps worker start-up to milliseconds; one block needs no pool at all.
     pool = worker_pool(workers, get_context("fork")) \
         if workers > 1 and len(blocks) > 1 else nullcontext()
-    with open(path, "w", newline="") as fh, pool as executor:
+    with names_file(path), open(path, "w", newline="") as fh, pool as executor:
         fh.write(",".join(names) + "\n")
         fmts = [EXACT_FMT if exact else FMT] * len(blocks)
         quanta = [_quanta(names, lattices)] * len(blocks)
@@ -163,12 +164,43 @@ class BackgroundWriter:
 
 
 def read_csv(path: Path | str) -> dict[str, np.ndarray]:
-    """Columns of a CSV of numbers (empty fields read as NaN), with NumPy's C parser."""
+    """Columns of a CSV of numbers (empty fields read as NaN), with NumPy's C parser.
+    A file that is not one raises ValueError in one line naming the file, the row
+    (its line in the file, the header being row 1) and the column."""
     with open(path) as fh:
-        names = fh.readline().strip().split(",")
+        header = fh.readline()
         body = fh.read()
+    if not header.strip():
+        raise ValueError(f"{path}: the file is empty (no header)" if not body.strip()
+                         else f"{path}: row 1 is empty; it must be the header of column names")
+    names = header.strip().split(",")
     if not body.strip():
         return {name: np.empty(0) for name in names}
+    try:
+        return _parse_body(body, names)
+    except ValueError:
+        # NumPy's message counts rows from the first data row and ends with a hint for
+        # its own API (`usecols`); find the row and say what is wrong with it instead.
+        raise ValueError(f"{path}: {_first_bad_row(body, names)}") from None
+
+
+def _first_bad_row(body: str, names: list[str]) -> str:
+    for k, line in enumerate(body.splitlines(), start=2):
+        if not line.strip():
+            continue
+        fields = line.split(",")
+        if len(fields) != len(names):
+            return (f"row {k} has {len(fields)} value{'s' * (len(fields) != 1)}, but the "
+                    f"header (row 1) names {len(names)} column{'s' * (len(names) != 1)}")
+        for name, text in zip(names, fields, strict=True):
+            try:
+                float(text.strip() or "nan")
+            except ValueError:
+                return f"row {k}, column {name}: {text.strip()!r} is not a number"
+    return "not a CSV of numbers"
+
+
+def _parse_body(body: str, names: list[str]) -> dict[str, np.ndarray]:
     # Empty fields become "nan" so the fast parser can take them.
     body = "\n" + body
     body = body.replace("\n,", "\nnan,").replace(",\n", ",nan\n")
@@ -178,7 +210,7 @@ def read_csv(path: Path | str) -> dict[str, np.ndarray]:
         body += "nan"
     data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2)
     if data.shape[1] != len(names):
-        raise ValueError(f"{path}: {data.shape[1]} values per row for {len(names)} columns")
+        raise ValueError(f"{data.shape[1]} values per row for {len(names)} columns")
     return {name: data[:, k] for k, name in enumerate(names)}
 
 
@@ -192,10 +224,15 @@ class CsvAppender:
         self.path = Path(path)
         self.fmt = EXACT_FMT if exact else FMT
         self.lattices = lattices
-        self.fh = open(self.path, "w", newline="")  # noqa: SIM115 (closed by close())
+        with names_file(self.path):
+            self.fh = open(self.path, "w", newline="")  # noqa: SIM115 (closed by close())
         self.names: list[str] | None = None
 
     def append(self, columns: dict[str, np.ndarray]) -> None:
+        with names_file(self.path):
+            self._append(columns)
+
+    def _append(self, columns: dict[str, np.ndarray]) -> None:
         if self.names is None:
             self.names = list(columns)
             self.fh.write(",".join(self.names) + "\n")
@@ -207,4 +244,5 @@ class CsvAppender:
             self.fh.write(_format_block(data[i:i + BLOCK_ROWS], self.fmt, quanta))
 
     def close(self) -> None:
-        self.fh.close()
+        with names_file(self.path):
+            self.fh.close()

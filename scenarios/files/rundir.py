@@ -28,19 +28,101 @@ class RunDirError(ValueError):
     """The output directory cannot be used (exists and is not empty, no --force)."""
 
 
-def check_out_dir(out: Path | str, force: bool = False) -> Path:
-    """Refuse an unusable ``--out`` before any work is done."""
+def public_path(path: Path | str) -> str:
+    """``path`` as the user knows it: a staging (or moved-aside) directory in it is
+    named by the run directory it becomes, ``.run.stage-HOST-PID-XXXXXXXX`` → ``run``."""
+    parts = Path(path).parts
+    return str(Path(*[m["name"] if (m := _OWNED.match(p)) else p for p in parts])) \
+        if parts else str(path)
+
+
+@contextlib.contextmanager
+def names_file(path: Path | str) -> Iterator[None]:
+    """An OSError inside the block names ``path`` when it names no file itself:
+    a write that fails on a full disk says only "No space left on device"."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename is not None:
+            raise
+        # OSError(errno, ...) gives the errno's own subclass (PermissionError, ...).
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+
+
+# What dynprop writes into the directories it makes (run, estimate, simulate,
+# linearization, montecarlo, tune, trim): `--force` replaces a directory that holds
+# nothing else.  Figures are dynprop's by their extension (they are named after what
+# they show, and come and go with the run); data files by their very names, so that
+# a user's own CSV or notes are never taken for a run's.
+OWN_FILES = frozenset((
+    "scenario.yaml", "case_scenario.yaml", "summary.json", "truth.csv", "telemetry.csv",
+    "estimate.csv", "smoothed.csv", "daily.csv", "comparison.npz", "trim_loop.csv",
+    "montecarlo.json", "montecarlo.npz", "montecarlo_case.json", "montecarlo_case.npz",
+    "report.json", "report.md", "tune.json", "tune.md", "tuned_noise.yaml", "trim.json",
+    "trim.md"))
+_OWN_PATTERN = re.compile(r"^(estimate_[a-z0-9_]+\.csv|[a-z0-9_]+\.png|"
+                          r"case-\d+\.(json|npz|full\.npz))$")
+OWN_DIRS = frozenset(("plots", "cases", "trim", "tune", "verify"))
+# Temporaries of a write killed half way: ``.NAME.XXXXXXXX`` (montecarlo.store's
+# atomic_write) and ``.NAME.tmp`` (figures.save_figure).
+_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.(tmp|[A-Za-z0-9_]{8})$")
+LISTED = 5   # foreign files named in a message
+
+
+def _is_own_file(name: str) -> bool:
+    if name in OWN_FILES or _OWN_PATTERN.match(name):
+        return True
+    m = _TEMPORARY.match(name)
+    return m is not None and (m["name"] in OWN_FILES or bool(_OWN_PATTERN.match(m["name"])))
+
+
+def foreign_files(out: Path) -> list[str]:
+    """What ``out`` holds that dynprop did not write, as paths relative to ``out``
+    (a directory with a trailing slash, not looked into), in sorted order."""
+    found = []
+    for path in sorted(Path(out).iterdir()):
+        if path.is_dir() and not path.is_symlink():
+            if path.name in OWN_DIRS:
+                found += [f"{path.name}/{f}" for f in foreign_files(path)]
+            elif not _OWNED.match(path.name):
+                found.append(f"{path.name}/")
+        elif not (path.is_file() and _is_own_file(path.name)):
+            found.append(path.name)
+    return found
+
+
+def check_out_dir(out: Path | str, force: int = 0, label: str = "--out") -> Path:
+    """Refuse an unusable output directory before any work is done.  ``force`` (the
+    count of ``--force``) replaces a non-empty one that holds only what dynprop
+    writes; 2 or more replaces it whatever it holds.  ``label`` names the option the
+    directory came from in messages ("" for a directory the command picks itself)."""
     out = Path(out)
+    where = f"{label} {out}" if label else str(out)
     if out.exists() and not out.is_dir():
-        raise RunDirError(f"--out {out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not force:
-        raise RunDirError(f"--out {out}: directory exists and is not empty (use --force)")
+        raise RunDirError(f"{where}: exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()):
+        if not force:
+            raise RunDirError(f"{where}: directory exists and is not empty (use --force)"
+                              if label == "--out" else
+                              f"{where}: directory exists and is not empty")
+        foreign = foreign_files(out) if force < 2 else []
+        if foreign:
+            names = ", ".join(foreign[:LISTED]) + (
+                f" and {len(foreign) - LISTED} more" if len(foreign) > LISTED else "")
+            if label == "--out":
+                raise RunDirError(
+                    f"{where}: holds {names}, which dynprop did not write, and --force "
+                    f"replaces only a directory of dynprop's own files: move them "
+                    f"elsewhere, or give --force --force to replace them too")
+            raise RunDirError(
+                f"{where}: holds {names}, which dynprop did not write, and dynprop "
+                f"replaces only a directory of its own files: move them elsewhere first")
     for parent in out.parents:
         if parent.exists():
             if not parent.is_dir():
-                raise RunDirError(f"--out {out}: {parent} is not a directory")
+                raise RunDirError(f"{where}: {parent} is not a directory")
             if not os.access(parent, os.W_OK):
-                raise RunDirError(f"--out {out}: {parent} is not writable")
+                raise RunDirError(f"{where}: {parent} is not writable")
             break
     return out
 
@@ -150,14 +232,15 @@ def clean_stale_handoffs(root: Path = SHM_ROOT) -> list[Path]:
 
 
 @contextlib.contextmanager
-def staged_run_dir(out: Path | str, force: bool = False) -> Iterator[Path]:
+def staged_run_dir(out: Path | str, force: int = 0, label: str = "--out") -> Iterator[Path]:
     """Yield a temporary sibling directory; on success it replaces ``out``.
 
-    An existing non-empty ``out`` is refused unless ``force``.  If anything fails
+    An existing non-empty ``out`` is refused unless ``force``, and one holding files
+    dynprop did not write unless ``force`` ≥ 2 (``check_out_dir``).  If anything fails
     while writing, ``out`` is left exactly as it was and the staging directory
     is removed.
     """
-    out = check_out_dir(out, force)
+    out = check_out_dir(out, force, label)
     created = [p for p in reversed(out.absolute().parents) if not p.exists()]
     out.parent.mkdir(parents=True, exist_ok=True)
     for note in clean_stale(out.parent):

@@ -47,30 +47,76 @@ class GriddedTelemetry:
         return self.rows < 0
 
     def stats(self, dt_s: float) -> dict:
-        """What summary.json says about the telemetry itself."""
+        """What summary.json says about the telemetry itself.  A dropout is a step
+        between rows longer than the file's own cadence (its most common step): a
+        1.024 s file on the 0.512 s grid misses every other filter step, but none of
+        its rows (``cadence_note`` says so)."""
         missing = self.missing
-        edges = np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
-        lengths = (edges[1::2] - edges[::2]) * dt_s
         steps = np.diff(self.columns["t_s"][~missing])
+        k = np.diff(np.flatnonzero(~missing))            # each step, in filter steps
+        cadence = int(np.bincount(k).argmax()) if k.size else 1
+        lengths = (k[k > cadence] - cadence) * dt_s
         return {"rows": int(self.n_rows), "filter_steps": int(len(self.rows)),
                 "missing_steps": int(missing.sum()), "dropouts": int(len(lengths)),
                 "longest_dropout_s": float(lengths.max(initial=0.0)),
-                "median_cadence_s": float(np.median(steps)) if steps.size else None}
+                "median_cadence_s": float(np.median(steps)) if steps.size else None,
+                "cadence_s": cadence * dt_s,
+                "cadence_note": cadence_note(cadence, dt_s)}
+
+
+def cadence_note(cadence_steps: int, dt_s: float) -> str | None:
+    """One line when the telemetry's cadence is not the filter's step (None when it is)."""
+    if cadence_steps == 1:
+        return None
+    return (f"telemetry cadence {cadence_steps * dt_s:g} s is not the filter's {dt_s:g} s "
+            f"step: the filter updates on 1 step in {cadence_steps} and propagates across "
+            f"the others, which are not counted as dropouts")
 
 
 def run_telemetry(run_dir: Path) -> Path | None:
     """The telemetry a run directory filtered: its telemetry.csv, else the file a
-    `dynprop estimate` directory names in its summary.json; None if neither is there
-    (a run longer than two days writes telemetry.csv only with output.telemetry: true)."""
-    own = Path(run_dir) / "telemetry.csv"
+    `dynprop estimate` directory recorded in its summary.json (``recorded_path``).
+    None for a run that wrote none (one longer than two days, without
+    output.telemetry: true); a RunDirError naming the file and why when it is gone."""
+    run_dir = Path(run_dir)
+    own = run_dir / "telemetry.csv"
     if own.is_file():
         return own
-    summary = Path(run_dir) / "summary.json"
-    if summary.is_file():
-        named = (json.loads(summary.read_text()).get("telemetry") or {}).get("file")
-        if named and Path(named).is_file():
-            return Path(named)
+    named = _recorded_telemetry(run_dir / "summary.json")
+    if named is not None:
+        path = recorded_path(run_dir, named)
+        if path.is_file():
+            return path
+        where = "" if Path(named).is_absolute() else f", recorded as {named} relative to it"
+        raise RunDirError(f"{run_dir}: the telemetry file {path} this estimate read is no "
+                          f"longer there (moved or deleted{where})")
+    if not (run_dir / "scenario.yaml").is_file():
+        raise RunDirError(f"{run_dir}: not a run directory (no scenario.yaml)")
+    from ..config.loader import load_scenario
+    from ..config.schema import output_writes_telemetry
+    if output_writes_telemetry(load_scenario(run_dir / "scenario.yaml")):
+        raise RunDirError(f"{run_dir}: its telemetry.csv is no longer there (the run wrote "
+                          "one: it was moved or deleted)")
     return None
+
+
+def _recorded_telemetry(summary: Path) -> str | None:
+    """The telemetry file an `estimate` directory's summary.json records (None in a
+    `run` directory, whose summary records none)."""
+    if not summary.is_file():
+        return None
+    try:
+        record = json.loads(summary.read_text()).get("telemetry")
+    except (ValueError, AttributeError):
+        return None
+    return record.get("file") if isinstance(record, dict) else None
+
+
+def recorded_path(run_dir: Path, named: str) -> Path:
+    """A path an output directory records: absolute, or relative to that directory
+    (never to the working directory, which changes from one command to the next)."""
+    path = Path(named)
+    return path if path.is_absolute() else Path(run_dir) / path
 
 
 def read_input_csv(path: Path, kind: str) -> dict[str, np.ndarray]:
@@ -79,8 +125,12 @@ def read_input_csv(path: Path, kind: str) -> dict[str, np.ndarray]:
         raise RunDirError(f"{path}: no such {kind} file")
     try:
         return read_csv(path)
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise RunDirError(f"{path}: not a numeric CSV ({str(exc).splitlines()[0]})") from None
+    except UnicodeDecodeError:
+        raise RunDirError(f"{path}: not a CSV text file (it holds bytes that are not UTF-8 "
+                          "text)") from None
+    except ValueError as exc:
+        # read_csv's own one line, naming the file, the row and the column.
+        raise RunDirError(str(exc).splitlines()[0]) from None
 
 
 def _problem_columns(path: Path, cols: dict, required: tuple[str, ...]) -> list[str]:

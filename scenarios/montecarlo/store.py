@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from ..config.schema import Scenario, resolved_yaml
-from ..files.rundir import RunDirError, check_out_dir
+from ..files.rundir import RunDirError, check_out_dir, names_file
 
 SCENARIO_FILE = "scenario.yaml"
 
@@ -36,17 +36,19 @@ def _umask() -> int:
 
 
 def atomic_write(path: Path, data: bytes) -> None:
-    """``data`` to ``path`` through a temporary sibling and a rename."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        # mkstemp makes 0600; the finished file gets the user's usual permissions.
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """``data`` to ``path`` through a temporary sibling and a rename; an OSError
+    names ``path`` (a full disk's names no file)."""
+    with names_file(path):
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        try:
+            # mkstemp makes 0600; the finished file gets the user's usual permissions.
+            os.fchmod(fd, 0o666 & ~_umask())
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
 
 
 def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
@@ -87,7 +89,7 @@ class SetDirectory:
         self.out = Path(out)
         self.cases_dir = self.out / "cases"
 
-    def open(self, s: Scenario, force: bool = False) -> bool:
+    def open(self, s: Scenario, force: int = 0) -> bool:
         """Create the set, or check that ``out`` holds this very set (returns True
         when resuming).  A directory of another set or other files is refused unless
         ``force``, which removes it first."""
@@ -108,6 +110,7 @@ class SetDirectory:
                     why = "it exists and is not a Monte Carlo set"
                 raise RunDirError(f"--out {self.out}: {why}; use --force to start over or "
                                   "another --out")
+            check_out_dir(self.out, force)   # never a directory of the user's own files
             shutil.rmtree(self.out)
         check_out_dir(self.out, force)
         self.cases_dir.mkdir(parents=True, exist_ok=True)

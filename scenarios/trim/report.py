@@ -28,10 +28,14 @@ from .batch import (
 def telemetry_path(run_dir: Path, given: Path | None) -> Path:
     """The telemetry the batch filter reads: ``given``, else the run's telemetry.csv,
     else the file a `dynprop estimate` directory names in its summary."""
+    from ..files.rundir import RunDirError
     from ..files.telemetry_file import run_telemetry
     if given is not None:
         return given
-    found = run_telemetry(run_dir)
+    try:
+        found = run_telemetry(run_dir)
+    except RunDirError as exc:
+        raise TrimError(f"{exc}; give it with --telemetry FILE") from None
     if found is not None:
         return found
     raise TrimError(f"{run_dir}: no telemetry.csv (a run longer than 2 days writes it only "
@@ -196,7 +200,7 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
         f"environment.solar.trim_tab_deg={r.rec.trim_tab_deg_new!r}",
         f"duration_s={r.batch.to_s!r}", "output.telemetry=true"])
     out = stage / "verify"
-    with staged_run_dir(out) as vstage:
+    with staged_run_dir(out, label="") as vstage:
         stream_to_directory(new, vstage)
     _, cols, _ = read_run(out, None)
     after = estimate_kappa(new, cols, choose_batch(cols["t_s"], new.sample_interval_s,
@@ -220,7 +224,8 @@ def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = No
     s, cols, truth = read_run(run_dir, telemetry)
     r = estimate_kappa(s, cols, choose_batch(cols["t_s"], s.sample_interval_s, from_s, to_s))
     d = report_dict(s, r, truth)
-    with staged_run_dir(run_dir / "trim", force=True) as stage:
+    # RUN_DIR/trim is trim's own, replaced each time (there is no --out to name).
+    with staged_run_dir(run_dir / "trim", force=True, label="") as stage:
         if do_verify:
             d["verify"] = verify(s, r, run_dir, stage, truth)
         (stage / "trim.json").write_text(json.dumps(d, indent=2, allow_nan=False) + "\n")

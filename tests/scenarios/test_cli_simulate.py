@@ -274,10 +274,25 @@ def test_existing_non_empty_out_is_refused_and_left_untouched(tmp_path, capsys):
 def test_force_replaces_an_existing_run(tmp_path, capsys):
     out = tmp_path / "run"
     out.mkdir()
-    (out / "notes.txt").write_text("old")
+    (out / "truth.csv").write_text("old")
     assert simulate(out, "--force") == 0
     assert {p.name for p in out.iterdir()} == RUN_FILES
     assert [p.name for p in tmp_path.iterdir()] == ["run"]  # no staging or backup left
+
+
+def test_force_keeps_files_dynprop_did_not_write_unless_given_twice(tmp_path, capsys):
+    """--force replaces a directory of dynprop's own files only; a user's notes stop
+    it (named), and a second --force is the explicit "replace whatever is there"."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "truth.csv").write_text("old")
+    (out / "notes.txt").write_text("mine")
+    assert simulate(out, "--force") == 2
+    err = capsys.readouterr().err
+    assert "notes.txt" in err and "--force --force" in err and len(err.splitlines()) == 1
+    assert (out / "notes.txt").read_text() == "mine" and (out / "truth.csv").read_text() == "old"
+    assert simulate(out, "--force", "--force") == 0
+    assert {p.name for p in out.iterdir()} == RUN_FILES
 
 
 def test_existing_empty_out_is_used(tmp_path):

@@ -30,11 +30,11 @@ def test_defaults_are_64_s_rows_and_telemetry_for_two_days():
 @pytest.mark.parametrize(("override", "message"), [
     ("output.interval_s=100", "output.interval_s: 100 s is not a whole multiple of "
      "sample_interval_s (0.512 s); nearest: 99.84 or 100.352"),
-    ("output.interval_s=0", "output.interval_s: Input should be greater than 0"),
-    ("output.interval_s=-64", "output.interval_s: Input should be greater than 0"),
+    ("output.interval_s=0", "output.interval_s: must be greater than 0"),
+    ("output.interval_s=-64", "output.interval_s: must be greater than 0"),
     ("output.interval_s=nan", "output.interval_s:"),
     ("output.interval_s=abc", "output.interval_s:"),
-    ("output.telemetry=maybe", "output.telemetry: Input should be 'auto', True or False"),
+    ("output.telemetry=maybe", "output.telemetry: must be 'auto', true or false"),
     ("output.intervall_s=64", "output.intervall_s: unknown key; did you mean 'interval_s'?"),
 ])
 def test_bad_output_values_get_one_line_naming_the_key(override, message, tmp_path):

@@ -178,12 +178,13 @@ def bad_inputs(run, tmp_path_factory) -> dict[str, list[str]]:
     blank = [",".join("" if i == iy else v for i, v in enumerate(r.split(",")))
              for r in rows]
     no_yaw = write_telemetry(base / "no_yaw.csv", header, blank)
-    # A run directory without its telemetry.csv (as a run over 2 days without
-    # output.telemetry=true).
+    # A run directory without its telemetry.csv, as a run over 2 days without
+    # output.telemetry=true (its scenario says 3 days).
     bare = base / "bare_run"
     bare.mkdir()
-    for name in ("scenario.yaml", "summary.json"):
-        shutil.copy(run / name, bare / name)
+    shutil.copy(run / "summary.json", bare / "summary.json")
+    (bare / "scenario.yaml").write_text(
+        str(load_scenario(run / "scenario.yaml", ["duration_s=259200"])))
     tel = str(run / "telemetry.csv")
     return {
         "short": ["tune", str(short), "--scenario", scen],
