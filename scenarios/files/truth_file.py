@@ -1,4 +1,6 @@
-"""truth.csv read back into the filter's model coordinates, for `estimate --truth`.
+"""truth.csv read back into the filter's model coordinates, for `estimate --truth`,
+at the samples of the filter's grid that the file has a row for: every sample for
+`dynprop simulate`'s file, every ``output.interval_s`` for `dynprop run`'s.
 
 The file holds what the run's truth arrays hold, at 10 significant digits
 (``csvio``): attitude, ω_BN, wheel momentum h and every torque by source.  From
@@ -28,20 +30,48 @@ ATTITUDE = ("t_s", "yaw_deg", "roll_deg", "pitch_deg", "wx_radps", "wy_radps", "
 
 @dataclass(frozen=True)
 class TruthFromFile(Euler312):
-    """truth.csv at the filter's grid times: what ``bridge.coordinates.truth_torques``
-    and ``model_truth`` read of a truth, and ``euler_rad`` (yaw, roll, pitch) for the
+    """truth.csv at the grid samples ``rows`` (increasing indices into the filter's
+    grid) it has a row for: what ``bridge.coordinates.truth_torques`` and
+    ``model_truth`` read of a truth, and ``euler_rad`` (yaw, roll, pitch) for the
     figures.  ``torques`` holds the external sources (``sim.history.EXTERNAL_TORQUES``)
-    the file has: the optional ones (the disturbance) only when it has their columns."""
+    the file has: the optional ones (the disturbance) only when it has their columns.
+    ``file_rows``: the rows the file holds (on the grid or not)."""
 
     t_s: np.ndarray
     euler_rad: np.ndarray
     w_br_radps: np.ndarray
     h_Nms: np.ndarray
     torques: dict[str, np.ndarray]
+    rows: np.ndarray
+    file_rows: int
+
+    def every_sample(self, n_samples: int) -> bool:
+        """Whether the truth has a row at each of the grid's ``n_samples`` samples."""
+        return len(self.rows) == n_samples
+
+
+# %.10g (``csvio``) keeps t_s within half a unit of its tenth digit, at most 5e-10
+# of |t|; 5.1e-10 leaves room for the grid's own t_0 + k·dt (~1e-16 of t).  Far
+# below a step (0.512 s), so a row matches one grid sample or none.
+TIME_MATCH_REL = 5.1e-10
+
+
+def common_samples(t_truth: np.ndarray, t0: float, dt: float, n: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(grid samples, file rows): the samples k of the grid t0 + k·dt (0 ≤ k < n) whose
+    time a truth row holds, to the precision t_s is written with, and that row (the
+    first, should the file repeat a time)."""
+    k = np.rint((t_truth - t0) / dt)
+    inside = (k >= 0) & (k < n)
+    ideal = t0 + k * dt
+    on = inside & (np.abs(t_truth - ideal) <= TIME_MATCH_REL * np.maximum(np.abs(ideal), dt))
+    samples, first = np.unique(k[on].astype(np.int64), return_index=True)
+    return samples, np.flatnonzero(on)[first]
 
 
 def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
-    """The truth at the filter's grid times ``t_grid`` (every one must have a row)."""
+    """The truth at the grid samples (``t_grid``: the filter's) it has a row for; at
+    least one is needed, or one line saying how to get a file that has them."""
     path = Path(path)
     cols = read_input_csv(path, "truth")
     # The optional sources have columns only in runs that flew them: read when the file
@@ -54,17 +84,15 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
     if missing:
         raise RunDirError("\n".join(f"{path}: missing column {c}" for c in missing))
     dt = s.sample_interval_s
-    t = cols["t_s"]
-    # Truth rows are matched to grid samples by their step number: the file's t_s
-    # is written to 10 digits, so compare indices, not times.
-    k_truth = np.rint((t - t_grid[0]) / dt)
-    k_grid = np.rint((t_grid - t_grid[0]) / dt)
-    where = np.searchsorted(k_truth, k_grid)
-    where = np.minimum(where, len(t) - 1)
-    absent = k_truth[where] != k_grid
-    if absent.any():
-        raise RunDirError(f"{path}: no row at t_s = {t_grid[np.argmax(absent)]:g} s: the truth "
-                          "must cover every sample of the telemetry's grid")
+    t0, n = float(t_grid[0]), len(t_grid)
+    rows, where = common_samples(cols["t_s"], t0, dt, n)
+    if not len(rows):
+        raise RunDirError(
+            f"{path}: no row at a time of the telemetry's filter grid ({t0:g} s + k × "
+            f"{dt:g} s, up to {t0 + (n - 1) * dt:g} s), so no error can be computed: use a "
+            "truth.csv of the same run or simulation (`dynprop simulate` writes every "
+            "sample; `dynprop run` every output.interval_s, a whole multiple of "
+            "sample_interval_s)")
     at = {name: values[where] for name, values in cols.items()}
     euler = np.column_stack([at["yaw_deg"], at["roll_deg"], at["pitch_deg"]]) * DEG
     w_bn = np.column_stack([at["wx_radps"], at["wy_radps"], at["wz_radps"]])
@@ -72,4 +100,5 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
     w_br = rate_wrt_orbit(c_br, w_bn, build.orbit(s).rate_radps)
     torques = {src: np.column_stack([at[f"{src}_{a}_Nm"] for a in "xyz"])
                for src in sources}
-    return TruthFromFile(t_grid, euler, w_br, at["h_Nms"], torques)
+    return TruthFromFile(t0 + rows * dt, euler, w_br, at["h_Nms"], torques, rows,
+                         len(cols["t_s"]))
