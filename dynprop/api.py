@@ -4,8 +4,11 @@ its command writes, into a temporary directory that ``save`` copies out."""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 from dynprop.scenarios.config.loader import ScenarioError
@@ -50,11 +53,17 @@ def _scenario(s) -> Scenario:
     return s if isinstance(s, Scenario) else load_scenario(s)
 
 
-def _temporary(prefix: str) -> tuple[Path, Path]:
+@contextlib.contextmanager
+def _temporary(prefix: str) -> Iterator[tuple[Path, Path]]:
     """A private directory for a result (removed with the result object), and the run
-    directory inside it that the command's code writes."""
+    directory inside it that the command's code writes.  Removed at once if the
+    command fails: no result object owns it then, and nothing else would."""
     owner = Path(tempfile.mkdtemp(prefix=f"dynprop-{prefix}-"))
-    return owner, owner / "run"
+    try:
+        yield owner, owner / "run"
+    except BaseException:
+        shutil.rmtree(owner, ignore_errors=True)
+        raise
 
 
 def simulate(scenario: Scenario | str) -> SimulationResult:
@@ -65,8 +74,7 @@ def simulate(scenario: Scenario | str) -> SimulationResult:
     from dynprop.scenarios.commands import simulate_to_directory
     from dynprop.scenarios.files.rundir import staged_run_dir
     s = _scenario(scenario)
-    owner, out = _temporary("simulate")
-    with staged_run_dir(out) as stage:
+    with _temporary("simulate") as (owner, out), staged_run_dir(out) as stage:
         simulate_to_directory(s, stage)
     return SimulationResult(out, owner)
 
@@ -81,8 +89,7 @@ def run(scenario: Scenario | str) -> RunResult:
     from dynprop.scenarios.commands import run_to_directory
     from dynprop.scenarios.files.rundir import staged_run_dir
     s = _scenario(scenario)
-    owner, out = _temporary("run")
-    with staged_run_dir(out) as stage:
+    with _temporary("run") as (owner, out), staged_run_dir(out) as stage:
         run_to_directory(s, stage)
     return RunResult(out, owner)
 
@@ -112,10 +119,10 @@ def montecarlo(scenario: Scenario | str, runs: int = 20, workers: int | None = N
         mc.summary["nees"]["mean_after_convergence"]; mc.figure("mc_nees")"""
     from dynprop.scenarios.montecarlo.runset import run_set
     s = _scenario(scenario)
-    owner, out = _temporary("montecarlo")
     # The set's own scenario.yaml reruns case K wherever the set is saved.
     command = "dynprop run DIR/scenario.yaml --montecarlo-case K"
-    run_set(s, runs, out, workers, scheduler, command=command)
+    with _temporary("montecarlo") as (owner, out):
+        run_set(s, runs, out, workers, scheduler, command=command)
     return MonteCarloResult(out, owner)
 
 
@@ -140,11 +147,9 @@ def observability(scenario: Scenario | str) -> TextReport:
 def covariance(scenario: Scenario | str) -> TextReport:
     """Section 6's steady-state yaw σ by every method against the paper's 0.040°
     (`dynprop covariance`); ``.data`` is the report's dict."""
-    from dynprop.estimator.covariance_report import covariance_report, format_covariance_report
-    from dynprop.scenarios.config.build import estimator_model, estimator_sensor_specs
-    s = _scenario(scenario)
-    params, noise = estimator_model(s)
-    report = covariance_report(params, noise, estimator_sensor_specs(s))
+    from dynprop.estimator.covariance_report import format_covariance_report
+    from dynprop.scenarios.bridge.covariance import scenario_covariance_report
+    report = scenario_covariance_report(_scenario(scenario))
     return TextReport(format_covariance_report(report), report)
 
 
@@ -164,11 +169,11 @@ def tune(source, scenario: Scenario | str | None = None, params=None, tie_xz: bo
     kw = {} if params is None else {"params": tuple(params)}
     options = TuneOptions(tie_xz=tie_xz, roll_variance=roll_variance,
                           bounds=dict(bounds or {}), **kw)
-    owner, out = _temporary("tune")
-    if scenario is not None and not isinstance(scenario, str | Path):
-        # A Scenario object goes to the loader as its resolved YAML, in the result's
-        # own temporary directory (removed with it).
-        (owner / "scenario.yaml").write_text(str(scenario))
-        scenario = owner / "scenario.yaml"
-    run_tune(Path(path), scenario, [], out, options, force=False)
+    with _temporary("tune") as (owner, out):
+        if scenario is not None and not isinstance(scenario, str | Path):
+            # A Scenario object goes to the loader as its resolved YAML, in the
+            # result's own temporary directory (removed with it).
+            (owner / "scenario.yaml").write_text(str(scenario))
+            scenario = owner / "scenario.yaml"
+        run_tune(Path(path), scenario, [], out, options, force=False)
     return TuneResult(out, owner)

@@ -17,9 +17,13 @@ and the child discards it when it starts ignoring SIGINT.
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import signal
+import threading
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import context as mp_context
+from multiprocessing import spawn
 
 _SIGINT = {signal.SIGINT}
 
@@ -43,6 +47,95 @@ def sigint_held() -> Iterator[None]:
 
 def _nothing() -> None:
     return None
+
+
+# Workers started by spawn or forkserver run the parent's __main__ again (as
+# __mp_main__) before their first task, so that functions defined there unpickle.
+# A user's script without an `if __name__ == "__main__":` guard then runs once per
+# worker: `dynprop.montecarlo` in it ran `dynprop.run` again in every worker.  Our
+# workers only ever run dynprop's own functions, so the parent does not send its
+# __main__ (loky's `init_main_module=False` does the same).  multiprocessing has no
+# option for it: the preparation data, built by spawn.get_preparation_data, loses
+# its two __main__ keys, for launches from this thread only, under a lock.
+_MAIN_KEYS = ("init_main_from_path", "init_main_from_name")
+_withholding = threading.Lock()
+
+
+@contextlib.contextmanager
+def _main_withheld() -> Iterator[None]:
+    launcher = threading.get_ident()
+    original = spawn.get_preparation_data
+
+    def preparation_data(name):
+        data = original(name)
+        if threading.get_ident() == launcher:
+            for key in _MAIN_KEYS:
+                data.pop(key, None)
+        return data
+
+    with _withholding:
+        spawn.get_preparation_data = preparation_data
+        try:
+            yield
+        finally:
+            spawn.get_preparation_data = original
+
+
+# Module-level classes: the process object is pickled to the child by reference.
+class _MainlessForkServerProcess(mp_context.ForkServerProcess):
+    @staticmethod
+    def _Popen(process_obj):
+        with _main_withheld():
+            return mp_context.ForkServerProcess._Popen(process_obj)
+
+
+class _MainlessSpawnProcess(mp_context.SpawnProcess):  # pragma: no cover - not POSIX
+    @staticmethod
+    def _Popen(process_obj):
+        with _main_withheld():
+            return mp_context.SpawnProcess._Popen(process_obj)
+
+
+class _MainlessForkServerContext(mp_context.ForkServerContext):
+    Process = _MainlessForkServerProcess
+
+
+class _MainlessSpawnContext(mp_context.SpawnContext):
+    Process = _MainlessSpawnProcess
+
+
+@contextlib.contextmanager
+def clean_start_context(preload: list[str]) -> Iterator[mp_context.BaseContext]:
+    """A multiprocessing context for worker pools whose processes start clean and
+    never run the parent's __main__ (see above).
+
+    forkserver where there is one: workers fork from a server that has imported
+    ``preload`` already, so each starts in milliseconds and inherits no threads or
+    locks from this process (tqdm's monitor, a notebook kernel's).
+
+    On leaving, the forkserver and the resource tracker it needs are stopped if this
+    block started them, so no process outlives the command.  Left running, they are
+    children of a notebook kernel, which at shutdown signals them for 29 s (the
+    tracker ignores SIGTERM); Jupyter kills the kernel after 5 s, before it removes
+    its temporary directories."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():  # pragma: no cover
+        yield _MainlessSpawnContext()
+        return
+    # multiprocessing's own singletons; _stop is what its test suite stops them with.
+    from multiprocessing import forkserver, resource_tracker
+    server, tracker = forkserver._forkserver, resource_tracker._resource_tracker
+    ours = [p for p, pid in ((server, server._forkserver_pid), (tracker, tracker._pid))
+            if pid is None]
+    ctx = _MainlessForkServerContext()
+    ctx.set_forkserver_preload(preload)
+    try:
+        yield ctx
+    finally:
+        # The server first: it holds the tracker's pipe open.  Each exits when its
+        # pipe from this process closes; the pools' workers have been joined.
+        for process in ours:
+            with contextlib.suppress(OSError):
+                process._stop()
 
 
 @contextlib.contextmanager

@@ -9,7 +9,6 @@ scheduler on a cluster); here there is only bookkeeping.
 from __future__ import annotations
 
 import hashlib
-import multiprocessing
 import os
 import sys
 from collections.abc import Callable, Iterable
@@ -17,7 +16,7 @@ from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 
 from ..config.schema import Scenario, resolved_yaml
-from ..workers import worker_pool
+from ..workers import clean_start_context, worker_pool
 from . import SchedulerError
 from .case import failed, run_case
 
@@ -40,14 +39,10 @@ def _progress(total: int, initial: int, desc: str):
 
 
 def _context():
-    # forkserver: workers fork from a clean server that has already imported the
-    # simulator, so each starts in milliseconds and inherits no threads or locks
-    # from this process (tqdm's monitor, for one).
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload([WORKER_MODULE])
-        return ctx
-    return multiprocessing.get_context("spawn")  # pragma: no cover - not POSIX
+    # Workers fork from a server that has already imported the simulator, and do
+    # not run the caller's __main__ again: a script using dynprop.montecarlo needs
+    # no `if __name__ == "__main__":` guard.
+    return clean_start_context([WORKER_MODULE])
 
 
 def run_local(s: Scenario, cases: list[int], keep: Iterable[int], workers: int,
@@ -57,10 +52,10 @@ def run_local(s: Scenario, cases: list[int], keep: Iterable[int], workers: int,
     restarted for the rest."""
     keep = set(keep)
     todo = list(cases)
-    bar = _progress(total or len(todo), done_before, "montecarlo")
-    try:
+    # One forkserver for the set, across pool restarts too; stopped after it.
+    with _context() as ctx, _progress(total or len(todo), done_before, "montecarlo") as bar:
         while todo:
-            with worker_pool(workers, _context()) as pool:
+            with worker_pool(workers, ctx) as pool:
                 running = {}
                 broken = False
                 while (todo or running) and not broken:
@@ -82,8 +77,6 @@ def run_local(s: Scenario, cases: list[int], keep: Iterable[int], workers: int,
                     for k in running.values():
                         on_done(failed(k, RuntimeError("worker process died")))
                         bar.update()
-    finally:
-        bar.close()
 
 
 def connect(address: str):
