@@ -8,6 +8,8 @@ filters' inputs: no I/O and no physics formula of its own (those are ``sim``'s,
   prior, a window padded with its neighbours' samples (one routine for every
   filter);
 - ``ekf``: the same for the extended Kalman filter;
+- ``covariance``: the scenario's inputs to Section 6's covariance analysis, the
+  yaw weighed as a run's filter weighs it;
 - ``twin``: the linear twin, the paper's model flown under the truth's torques and
   sensed with the truth's noise draws.
 

@@ -25,6 +25,7 @@ from dynprop.estimator.tune import (
     profile,
 )
 
+from ..bridge.covariance import dss_yaw_weighting
 from ..config import build
 from ..units import RAD2DEG
 from .source import TuneError, TuneSource
@@ -127,7 +128,9 @@ def _sigma_yaw(src: TuneSource, noise: ProcessNoise, roll_factor: float) -> dict
         sensors = replace(sensors, roll_noise_deg=sensors.roll_noise_deg
                           * np.sqrt(roll_factor), roll_quantum_deg=sensors.roll_quantum_deg
                           * np.sqrt(roll_factor))
-    rep = covariance_report(src.params, noise, sensors, gap_s=src.gap_s())
+    # The yaw weighed as the run's filter weighs it, as `dynprop covariance` does.
+    rep = covariance_report(src.params, noise, sensors, gap_s=src.gap_s(),
+                            **dss_yaw_weighting(src.scenario))
     q = 0.5 * (noise.q_x + noise.q_z)
     return {"eq55": float(np.sqrt(approx_yaw_variance(q, src.params.H_Nms,
                                                       src.params.omega0_radps)) * RAD2DEG),
