@@ -6,6 +6,8 @@ Draws only what it is given; no physics.
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 from matplotlib.ticker import FixedLocator, FuncFormatter, MultipleLocator
 
@@ -13,6 +15,8 @@ from .reduce import bins, f64, finite, pct, runs_of
 
 GAP_LABEL = "no Sun-sensor yaw"
 GAP_COLOR = "0.85"
+SHORT_GAP_COLOR = "#cfe0ee"   # pale blue: a short outage, told apart from the Sun gap
+DAYS_BEYOND_H = 72.0     # time axes in days for spans longer than this
 _MAX_SHADED = 400        # beyond this many intervals, shade a per-bin mask instead
 
 
@@ -49,14 +53,57 @@ def gap_ends(t_s: np.ndarray, gap, min_gap_s: float = 0.0) -> np.ndarray:
 
 
 def time_axis(ax, t_h: np.ndarray) -> None:
+    """Hours on the time axis up to three days, days beyond (the data stay in hours:
+    only the ticks and their labels change), with round steps of either."""
     span = float(t_h[-1] - t_h[0]) if t_h.size > 1 else 0.0
+    days = span > DAYS_BEYOND_H
     if span > 0:
-        for step in (0.01, 0.02, 0.05, 0.1, 0.25, 0.5, 1, 2, 3, 6, 12, 24, 48, 168):
-            if span / step <= 16:
-                ax.xaxis.set_major_locator(MultipleLocator(step))
-                break
+        steps = [24.0 * d for d in (1, 2, 5, 7, 10, 14, 30, 60, 91, 182, 365)] if days \
+            else (0.01, 0.02, 0.05, 0.1, 0.25, 0.5, 1, 2, 3, 6, 12, 24, 48)
+        step = next((s for s in steps if span / s <= 16), steps[-1])
+        ax.xaxis.set_major_locator(MultipleLocator(step))
         ax.set_xlim(t_h[0], t_h[-1])
-    ax.set_xlabel("time (h)")
+    if days:
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 24.0:g}"))
+    ax.set_xlabel("time (days)" if days else "time (h)")
+
+
+def shade_gaps(ax, t_s: np.ndarray, t_h: np.ndarray, gap, min_gap_s: float,
+               labels: tuple[str, str] | None) -> None:
+    """The yaw outages, in two shades: Sun gaps (at least ``min_gap_s``: no head sees
+    the Sun) and shorter outages (at the default geometry the ~1.3 h noon band,
+    where the Sun is too near the yaw axis for a yaw).  ``labels`` (Sun gap, short)
+    or None for an unlabelled panel."""
+    gap = np.asarray(gap, dtype=bool)
+    long = np.zeros_like(gap)
+    for a, b in runs_of(gap):
+        if t_s[b] - t_s[a] >= min_gap_s:
+            long[a:b + 1] = True
+    long_label, short_label = labels if labels is not None else (None, None)
+    shade_mask(ax, t_h, long, long_label)
+    shade_mask(ax, t_h, gap & ~long, short_label, color=SHORT_GAP_COLOR)
+
+
+def gap_labels(min_gap_s: float) -> tuple[str, str]:
+    """The two shades' labels when the caller knows no more than the threshold."""
+    h = f"{min_gap_s / 3600:g} h"
+    return (f"Sun gap (no Sun-sensor yaw for {h} or more)",
+            f"shorter yaw outage (under {h})")
+
+
+def time_unit(t_h: np.ndarray):
+    """(format, unit) for times written on a figure, matching its time axis: hours
+    ("12.34", "h") up to three days, days ("29.87", "d") beyond."""
+    span = float(t_h[-1] - t_h[0]) if len(t_h) > 1 else 0.0
+    if span > DAYS_BEYOND_H:
+        return (lambda t: f"{t / 24.0:.2f}"), "d"
+    return (lambda t: f"{t:.2f}"), "h"
+
+
+def at_time(t_h: np.ndarray, t: float) -> str:
+    """"12.34 h" or "29.87 d", as ``time_unit``."""
+    n, u = time_unit(t_h)
+    return f"{n(t)} {u}"
 
 
 def minus(text: str) -> str:
@@ -156,17 +203,59 @@ def note_clipped(ax, t_h: np.ndarray, series: dict, lo: float, hi: float, unit: 
         share = 100.0 * idx.size / max(1, np.count_nonzero(np.isfinite(y)))
         t0, t1 = t_h[idx[0]], t_h[idx[-1]]
         early = t0 - t_h[0] <= 0.01 * (t_h[-1] - t_h[0])
-        when = (f"t ≤ {t1:.2f} h" if early and t1 - t0 < 0.1 * (t_h[-1] - t_h[0])
-                else f"{t0:.2f}–{t1:.2f} h" if idx[-1] - idx[0] + 1 == idx.size
-                else f"between {t0:.2f} and {t1:.2f} h")
+        n, u = time_unit(t_h)
+        when = (f"t ≤ {n(t1)} {u}" if early and t1 - t0 < 0.1 * (t_h[-1] - t_h[0])
+                else f"{n(t0)}–{n(t1)} {u}" if idx[-1] - idx[0] + 1 == idx.size
+                else f"between {n(t0)} and {n(t1)} {u}")
         notes.append(f"{name} off scale: {share:.2g}% of samples ({when}), "
-                     f"max {fmt(float(y[k]), digits)} {unit} at {t_h[k]:.2f} h")
+                     f"max {fmt(float(y[k]), digits)} {unit} at {n(t_h[k])} {u}")
         edge = hi if y[k] > hi else lo
         ax.plot([t_h[k]], [edge], marker="^" if y[k] > hi else "v", ms=7, color="k",
                 clip_on=False, zorder=8, ls="none", label="_off-scale mark")
     if notes:
         ax.set_title("\n".join(notes), loc="right", fontsize=7.5, color="0.15")
     return notes
+
+
+WARNING_COLOR = "#c00000"
+WARNING_LINE_IN = 0.19   # inches per line of 9-point warning text
+
+
+def warnings_text(messages, width: int = 160) -> str:
+    """The run's warnings as one block, each wrapped, or "" when there are none."""
+    messages = [m for m in (messages or []) if m]
+    return "\n".join(textwrap.fill(f"WARNING: {m}", width, subsequent_indent="    ")
+                     for m in messages)
+
+
+def warnings_height_in(text: str) -> float:
+    """Height (inches) of the axes row holding ``text``; 0 without warnings."""
+    return WARNING_LINE_IN * (text.count("\n") + 1) + 0.1 if text else 0.0
+
+
+def draw_warnings(ax, text: str) -> None:
+    """The warnings in red in their own row above the panels (below them they would
+    share the space of the figure's legend)."""
+    ax.axis("off")
+    ax.text(0.0, 1.0, text, transform=ax.transAxes, ha="left", va="top", fontsize=9,
+            color=WARNING_COLOR, label="warnings")
+
+
+def panel_figure(ratios, warnings, inch: float, extra: float = 1.8, width_in: float = 13.0):
+    """A figure of stacked panels sharing the time axis (height ``inch`` per unit of
+    ``ratios`` plus ``extra`` for titles and legend) and, above them when there are
+    warnings, a row holding those.  Returns (figure, the panels' axes)."""
+    import matplotlib.pyplot as plt
+    # About 12 characters of 9-point text per inch: wrapped to the figure's width.
+    text = warnings_text(warnings, width=int(12 * width_in))
+    top = [warnings_height_in(text) / inch] if text else []
+    fig, axes = plt.subplots(len(top) + len(ratios), 1, sharex=True, layout="constrained",
+                             figsize=(width_in, inch * (sum(ratios) + sum(top)) + extra),
+                             squeeze=False, gridspec_kw={"height_ratios": top + ratios})
+    axes = axes[:, 0]
+    if text:
+        draw_warnings(axes[0], text)
+    return fig, axes[len(top):]
 
 
 def dot_handle(ax, color, label: str, alpha: float = 0.8) -> None:

@@ -189,9 +189,18 @@ def plot_budget(labels, columns: dict[str, list[float]], total: dict[str, float]
     return fig
 
 
-def plot_estimation(deltas, est: dict, nees_bounds, caption: str):
+def _note(ax, text: str) -> None:
+    """Why a panel has nothing to show, written in the panel itself."""
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=9,
+            color="0.2", bbox=dict(facecolor="white", edgecolor="0.6", lw=0.5))
+
+
+def plot_estimation(deltas, est: dict, nees_bounds, caption: str,
+                    why_empty: str = "not tested: the run has no Sun-gap end"):
     """Filter on nonlinear and on linear telemetry against the initial error: yaw
-    error at the last Sun-gap end (with the filter's 3σ) and mean NEES."""
+    error at the last Sun-gap end (with the filter's 3σ) and mean NEES.  A panel
+    without a single finite value (no Sun-gap end in the run) carries ``why_empty``
+    instead of an empty log axis."""
     fig, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True, sharex=True)
     d = np.asarray(deltas, dtype=float)
     for c, kind in enumerate(("attitude", "rate")):
@@ -203,7 +212,13 @@ def plot_estimation(deltas, est: dict, nees_bounds, caption: str):
         ax.set_yscale("log")
         ax.set_ylabel("|yaw error| at last gap end (deg)")
         ax.set_title(f"{kind} sweep")
-        ax.legend(fontsize=8)
+        tested = np.isfinite(np.r_[e["real"], e["linear"], e["sigma"]].astype(float))
+        if tested.any():
+            ax.legend(fontsize=8)
+        else:           # no y-ticks: an empty log axis would read as data near 1°
+            ax.set_yscale("linear")
+            ax.set_yticks([])
+            _note(ax, why_empty)
         ax = axes[1, c]
         ax.plot(d, e["nees_real"], "-o", ms=4, label="real")
         ax.plot(d, e["nees_linear"], "--s", ms=4, label="linearized")

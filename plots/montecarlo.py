@@ -2,7 +2,9 @@
 
 Plain arrays in, figures out (no physics here).  Every figure carries a caption
 with the scenario, seed, number of runs and the reproducing command, so that a
-figure lifted into a review still says where it came from.
+figure lifted into a review still says where it came from.  Legends sit below the
+axes (one per figure), time axes are laid out by ``decor.time_axis``, and a panel
+with nothing to show says why ("not tested: …").
 """
 
 from __future__ import annotations
@@ -15,13 +17,27 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .decor import figure_legend, time_axis  # noqa: E402
+
 STATE_LABELS = ("roll", "roll rate", "yaw", "yaw rate", "h", "N_px", "N_pz", "N_cx", "N_cz")
 _GAP = "0.88"
 
 
-def _caption(fig, caption: str) -> None:
-    fig.get_layout_engine().set(rect=(0, 0.03, 1, 0.97))
+_CAPTION_PT = 14.0      # the caption's strip at the bottom: 8 pt text and its margin
+
+
+def _caption(fig, caption: str, legend_axes=(), ncol: int = 4) -> None:
+    """The caption in a strip at the foot of the figure and, just above it and below
+    the axes, one legend for ``legend_axes`` (``decor.figure_legend``)."""
+    strip = _CAPTION_PT / (72.0 * fig.get_figheight())
+    fig.get_layout_engine().set(rect=(0, strip, 1, 1 - strip))
     fig.text(0.5, 0.003, caption, ha="center", va="bottom", fontsize=8, color="0.3")
+    figure_legend(fig, legend_axes, ncol=ncol)
+    if fig.legends:
+        # An outside legend sits at the figure's edge, while the layout keeps its room
+        # above the caption's strip: lift it by the strip.
+        leg = fig.legends[-1]
+        leg.borderaxespad = _CAPTION_PT / leg.prop.get_size_in_points()
 
 
 def _shade(ax, gaps_h, label=True) -> None:
@@ -30,9 +46,15 @@ def _shade(ax, gaps_h, label=True) -> None:
                    else None)
 
 
-def _inside(fraction: dict | None) -> str:
-    return "run shorter than the convergence time" if fraction is None \
-        else f"{100 * fraction['inside']:.0f}% inside"
+def _inside(fraction: dict | None, converged_h: float) -> str:
+    return "not tested: no sample after the convergence time" if fraction is None \
+        else f"{100 * fraction['inside']:.0f}% inside after {converged_h:g} h"
+
+
+def note(ax, text: str) -> None:
+    """Why a panel has nothing to show, written in the panel itself."""
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=10,
+            color="0.2", bbox=dict(facecolor="white", edgecolor="0.6", lw=0.5))
 
 
 def _converged(ax, t_h: float) -> None:
@@ -65,11 +87,12 @@ def plot_ensemble_errors(d: dict, eq55_deg: float, n_runs: int, converged_h: flo
         ax.set_yscale("log")
         ax.set_ylabel(f"{name} ({unit})")
         ax.grid(True, which="both", alpha=0.25)
-        ax.legend(loc="lower right", fontsize=8, ncol=3, framealpha=0.9)
-    axes[-1].set_xlabel("time (h)")
-    axes[0].set_title("Monte Carlo accuracy: ensemble RMS error against the filter's σ "
-                      "(dotted line: start of the NEES test)")
-    _caption(fig, caption)
+    time_axis(axes[-1], t_h)
+    test = (f"dotted line: {converged_h:g} h, the start of the NEES test"
+            if np.any(t_h > converged_h) else
+            f"no NEES test: the runs end by its start, {converged_h:g} h")
+    axes[0].set_title(f"Monte Carlo accuracy: ensemble RMS error against the filter's σ ({test})")
+    _caption(fig, caption, axes, ncol=3)
     return fig
 
 
@@ -84,27 +107,26 @@ def plot_ensemble_nees(d: dict, summary: dict, converged_h: float, caption: str)
     ax = axes[0]
     _shade(ax, d["gaps_h"])
     ax.plot(t_h, d["nees_avg"], color="C0", lw=1,
-            label=f"averaged NEES, nonlinear truth ({_inside(n['fraction_after_convergence'])} "
-            f"after {converged_h:g} h)")
+            label="averaged NEES, nonlinear truth "
+            f"({_inside(n['fraction_after_convergence'], converged_h)})")
     if "nees_avg_linear" in d:
         ax.plot(t_h, d["nees_avg_linear"], color="C2", lw=1, ls="--",
                 label="averaged NEES, linear twin "
-                f"({_inside(n['linear']['fraction_after_convergence'])})")
+                f"({_inside(n['linear']['fraction_after_convergence'], converged_h)})")
     if "nees_avg_ekf" in d:
         ax.plot(t_h, d["nees_avg_ekf"], color="C4", lw=1, ls=":",
                 label="averaged NEES, EKF "
-                f"({_inside(summary['ekf']['nees']['fraction_after_convergence'])})")
+                f"({_inside(summary['ekf']['nees']['fraction_after_convergence'], converged_h)})")
     ax.axhspan(lo, hi, color="C1", alpha=0.2,
                label=f"95% bounds for {n['runs']} runs: [{lo:.2f}, {hi:.2f}]")
     ax.axhline(n["dof"], color="C1", lw=1, label=f"expected value {n['dof']}")
     _converged(ax, converged_h)
     ax.set_yscale("log")
-    ax.text(0.01, 0.02, "\n".join(textwrap.wrap(n["diagnosis"], 150)), transform=ax.transAxes,
-            fontsize=8, va="bottom", bbox=dict(facecolor="white", alpha=0.85, lw=0.5))
     ax.set_ylabel("NEES averaged over runs (9 states)")
     ax.grid(True, which="both", alpha=0.25)
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_title("Filter consistency over the ensemble")
+    # The diagnosis above the panel, where it can cover no trace.
+    fig.suptitle("Filter consistency over the ensemble")
+    ax.set_title("\n".join(textwrap.wrap(n["diagnosis"], 150)), loc="left", fontsize=8)
     ax = axes[1]
     _shade(ax, d["gaps_h"], label=False)
     cmap = plt.get_cmap("tab10")
@@ -116,10 +138,9 @@ def plot_ensemble_nees(d: dict, summary: dict, converged_h: float, caption: str)
     _converged(ax, converged_h)
     ax.set_yscale("log")
     ax.set_ylabel("(error/σ)² averaged over runs")
-    ax.set_xlabel("time (h)")
+    time_axis(ax, t_h)
     ax.grid(True, which="both", alpha=0.25)
-    ax.legend(loc="lower right", fontsize=8, ncol=5)
-    _caption(fig, caption)
+    _caption(fig, caption, axes, ncol=5)
     return fig
 
 
@@ -147,9 +168,11 @@ def plot_gap_end_yaw(d: dict, summary: dict, caption: str):
     """Strip plot of the yaw error at the end of each Sun gap in units of each case's
     own filter σ: one column per gap end, one dot per case, with the ±1/2/3 levels a
     consistent filter puts 68 / 95 / 99.7% of its cases inside.  A histogram of a
-    handful of cases says nothing a dot per case does not say better."""
+    handful of cases says nothing a dot per case does not say better.  Without a gap
+    end in the runs the panel says "not tested" and why.  (At least 10 in wide: the
+    caption, a reproducing command, must fit.)"""
     gaps = summary["gap_end_yaw"]
-    fig, ax = plt.subplots(figsize=(max(7.0, 3.2 * len(gaps) + 3.0), 6.4),
+    fig, ax = plt.subplots(figsize=(max(10.0, 3.2 * len(gaps) + 3.0), 6.4),
                            constrained_layout=True)
     twin = any(f"gap{g['gap']}_yaw_error_linear_deg" in d for g in gaps)
     off = 0.17 if twin else 0.0
@@ -184,8 +207,11 @@ def plot_gap_end_yaw(d: dict, summary: dict, caption: str):
     ax.set_xticks(range(len(gaps)), ticks, fontsize=8.5)
     ax.set_ylabel("yaw error at the end of the Sun gap / filter σ at that time")
     ax.grid(True, axis="y", alpha=0.25)
-    ax.legend(fontsize=8, loc="upper right", framealpha=0.9)
+    if not gaps:
+        t_s = np.asarray(d.get("t_s", []), dtype=float)
+        length = f" (their record ends at {t_s[-1] / 3600:.3g} h)" if t_s.size else ""
+        note(ax, f"not tested: no Sun gap ends within the runs{length}")
     ax.set_title("Yaw at the end of each Sun gap, one dot per case, in units of the "
                  "filter's own σ", fontsize=10.5)
-    _caption(fig, caption)
+    _caption(fig, caption, [ax], ncol=4)
     return fig

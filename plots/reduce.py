@@ -74,11 +74,12 @@ def band(t_h: np.ndarray, lower, upper) -> tuple[np.ndarray, np.ndarray, np.ndar
             np.repeat(np.fmax.reduceat(upper, starts), 2))
 
 
-def nice_interval_s(span_s: float, n_target: int = 300) -> float:
+def nice_interval_s(span_s: float, n_target: int = 300, min_s: float = 0.0) -> float:
     """A round interval (1 s … 1 day) giving about ``n_target`` intervals over the span:
-    enough to follow the σ envelope, few enough that each interval's band reads."""
+    enough to follow the σ envelope, few enough that each interval's band reads; and
+    at least ``min_s`` (a statistic per interval wants several samples)."""
     for step in (1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 21600, 86400):
-        if span_s / step <= n_target:
+        if span_s / step <= n_target and step >= min_s:
             return float(step)
     return 86400.0
 
@@ -106,7 +107,7 @@ def stride(t_h: np.ndarray, y, n_max: int = MAX_DOTS):
     """Every k-th finite sample, k chosen so at most ``n_max`` remain."""
     y = f64(y)
     ok = np.flatnonzero(np.isfinite(y))
-    step = max(1, ok.size // n_max)
+    step = max(1, -(-ok.size // n_max))     # ceiling: at most n_max, as promised
     ok = ok[::step]
     return t_h[ok], y[ok]
 

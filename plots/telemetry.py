@@ -25,10 +25,11 @@ from .decor import (  # noqa: E402
     nice_up,
     note_clipped,
     robust_half,
-    shade_mask,
+    shade_gaps,
     symlog_axis,
     time_axis,
 )
+from .decor import gap_labels as gap_label_pair  # noqa: E402
 from .reduce import band, f64, finite, max_abs, minmax_line, pct, stride  # noqa: E402
 
 HEAD_NAMES = ("dss", "cass1", "cass2")
@@ -120,7 +121,9 @@ def _wheel_panel(ax, t_h, wheels_rpm: dict) -> None:
 
 
 def plot_telemetry_overview(t_s, measured: dict, truth: dict | None, wheels_rpm: dict, gap,
-                            title: str, yaw_sigma=None, sun_head=None):
+                            title: str, yaw_sigma=None, sun_head=None, *,
+                            min_gap_s: float = 0.0,
+                            gap_labels: tuple[str, str] | None = None):
     """Telemetry against time: the true attitude (with a truth), Earth-sensor roll and
     pitch and the ground yaw by Sun-sensor head (measured − true with a truth,
     measured without), and the wheel speeds relative to their first value.
@@ -131,6 +134,8 @@ def plot_telemetry_overview(t_s, measured: dict, truth: dict | None, wheels_rpm:
     t_s = f64(t_s)
     t_h = t_s / 3600.0
     gap = np.asarray(gap, dtype=bool)
+    # Sun gaps (at least min_gap_s) and shorter yaw outages, shaded apart.
+    labels = gap_labels or (gap_label_pair(min_gap_s) if min_gap_s > 0 else (GAP_LABEL, GAP_LABEL))
     rows = (["attitude"] if truth else []) + ["earth", "yaw"] + (["wheels"] if wheels_rpm else [])
     heights = {"attitude": 2.2, "earth": 2.6, "yaw": 3.4, "wheels": 2.2}
     fig, axes = plt.subplots(len(rows), 1, figsize=(13, sum(heights[r] for r in rows) + 1.8),
@@ -138,7 +143,7 @@ def plot_telemetry_overview(t_s, measured: dict, truth: dict | None, wheels_rpm:
                              gridspec_kw={"height_ratios": [heights[r] for r in rows]})
     axes = axes[:, 0]
     for ax, row in zip(axes, rows, strict=True):
-        shade_mask(ax, t_h, gap, GAP_LABEL)
+        shade_gaps(ax, t_s, t_h, gap, min_gap_s, labels)
         if row == "attitude":
             _attitude_panel(ax, t_h, truth)
         elif row == "earth":

@@ -11,15 +11,18 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .decor import shade_mask  # noqa: E402
+from .decor import figure_legend, shade_mask, time_axis  # noqa: E402
 
 
 def plot_trim(shape_t_s: np.ndarray, shape_xz: np.ndarray, kappa_Nm: float, sigma_Nm: float,
               rows_t_s: np.ndarray, filter_xz: np.ndarray, title: str,
               truth_t_s: np.ndarray | None = None, truth_xz: np.ndarray | None = None):
-    """Two panels (roll, yaw torque against time in hours): the fitted solar torque
-    κ̂ · shape with its ±1σ band, the filter's running torque estimate less the
-    fitted constants, and the true solar torque when given.  Eclipses are shaded."""
+    """Two panels (roll, yaw torque against time): the fitted solar torque κ̂ · shape
+    with its ±3σ band (σ of κ̂ times |shape|; ±3σ like every other figure of the tool,
+    and an outlined band, since ±1σ is a few percent of the torque and did not show),
+    the filter's running torque estimate less the fitted constants, and the true
+    solar torque when given.  Eclipses are shaded.  One legend, below the axes, so
+    that it covers no curve."""
     t_h = np.asarray(shape_t_s) / 3600.0
     fig, axes = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True, constrained_layout=True)
     eclipse = ~np.any(shape_xz != 0, axis=1)
@@ -32,14 +35,15 @@ def plot_trim(shape_t_s: np.ndarray, shape_xz: np.ndarray, kappa_Nm: float, sigm
         if truth_t_s is not None:
             ax.plot(np.asarray(truth_t_s) / 3600.0, truth_xz[:, i], lw=1.6, color="C1",
                     ls="--", label="true solar torque")
-        ax.fill_between(t_h, fit - band, fit + band, color="C0", alpha=0.25, lw=0,
-                        label="±1σ")
+        ax.fill_between(t_h, fit - 3 * band, fit + 3 * band, facecolor="C0", alpha=0.3,
+                        edgecolor="C0", lw=0.6,
+                        label=f"±3σ of κ̂ (σ = {sigma_Nm:.2g} N m) × |unit solar torque|")
         ax.plot(t_h, fit, lw=1.0, color="C0", label="κ̂ × unit solar torque")
         ax.set_ylabel(f"{name} torque (N m)")
         ax.grid(alpha=0.3)
-    axes[-1].set_xlabel("time (h)")
-    axes[0].legend(loc="upper right", fontsize=8, ncol=2)
+    time_axis(axes[-1], t_h)
     fig.suptitle(title, fontsize=10)
+    figure_legend(fig, axes, ncol=3)
     return fig
 
 

@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .decor import time_axis  # noqa: E402
+
 
 def shade_intervals(ax, t_h: np.ndarray, mask: np.ndarray, label: str | None) -> None:
     """Grey bands over the intervals where ``mask`` is true."""
@@ -54,7 +56,7 @@ def plot_truth(t_s: np.ndarray, attitude_deg: dict[str, np.ndarray], h_Nms: np.n
         if np.any(mag > 0):
             ax.semilogy(t_h, np.where(mag > 0, mag, np.nan), lw=0.8, label=name)
     ax.set_ylabel(f"|torque|, {mean_window_s / 60:g}-min mean (N m)")
-    ax.set_xlabel("time (h)")
+    time_axis(ax, t_h)      # hours, or days beyond three days
     shade_intervals(ax, t_h, eclipse, None)
     ax.legend(loc="upper right", ncol=3, fontsize=8)
     ax.grid(alpha=0.3, which="both")

@@ -42,7 +42,10 @@ def plot_tune(profiles: dict, nis_hourly: dict, nis_bounds: dict, rho: dict, lag
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="lower center")
     ax = axes[1]
-    styles = {"scenario": dict(ls="--", lw=1.0), "tuned": dict(ls="-", lw=1.4)}
+    # The tuned curves broad and pale, the scenario's thin, dashed and on top: where
+    # tuning leaves a kind unchanged (yaw when only q_w moves), both still show.
+    styles = {"scenario": dict(ls="--", lw=1.0, zorder=3),
+              "tuned": dict(ls="-", lw=2.4, alpha=0.5, zorder=2)}
     for setting, by_kind in nis_hourly.items():
         for k, kind in enumerate(KINDS):
             if kind not in by_kind:

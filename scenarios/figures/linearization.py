@@ -68,7 +68,10 @@ def draw_report_figures(out: Path, report: dict, arrays: dict, sweep_deg, kinds
                   "sigma": [(e["yaw_sigma_gap_end_deg"] or [np.nan])[-1] for e in cs],
                   "nees_real": [e["nees_mean_real"] for e in cs],
                   "nees_linear": [e["nees_mean_linear"] for e in cs]}
-    figs["estimation.png"] = pl.plot_estimation(sweep_deg, est, chi2_bounds(N_STATES, 1), cap)
+    why = (f"not tested: the {m['duration_s'] / 3600:g} h run has no Sun-gap end"
+           if sw["gap_samples"] is None else "not tested: no Sun-gap end in the sweep's runs")
+    figs["estimation.png"] = pl.plot_estimation(sweep_deg, est, chi2_bounds(N_STATES, 1), cap,
+                                                why_empty=why)
     paths = []
     for name, fig in figs.items():
         path = out / name

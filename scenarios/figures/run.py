@@ -11,6 +11,7 @@ gets truth.png and telemetry.png from its CSV files.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 from collections.abc import Iterator
 from multiprocessing import get_context
@@ -20,7 +21,6 @@ import numpy as np
 import yaml
 from dynprop.estimator import model as em
 from dynprop.estimator.consistency import chi2_bounds
-from dynprop.estimator.covariance import PAPER_SIGMA_YAW_DEG
 from dynprop.plots.consistency import plot_consistency
 from dynprop.plots.errors import plot_errors, plot_estimates
 from dynprop.plots.run_figures import TORQUE_NAMES, plot_torques
@@ -63,6 +63,47 @@ def figure_set(keys) -> list[str]:
             "torques.png"] + (["telemetry_overview.png"] if "tel_yaw_deg" in keys else [])
 
 
+def _summary(run_dir: Path) -> dict | None:
+    """The run's summary.json (its full-rate NEES figures, per-state means and
+    warnings), or None when the directory has none (yet)."""
+    path = Path(run_dir) / "summary.json"
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _warnings(summary: dict | None, only: str | None = None) -> list[str]:
+    """summary.json's ``warnings`` messages (``only``: those whose check ends so,
+    e.g. "nees"); none without the key."""
+    items = (summary or {}).get("warnings") or []
+    return [w["message"] for w in items if isinstance(w, dict) and w.get("message")
+            and (only is None or str(w.get("check", "")).endswith(only))]
+
+
+def _gap_labels(scenario: dict, min_gap_s: float) -> tuple[str, str]:
+    """What the two kinds of yaw outage are (decor.shade_gaps): a Sun gap, where no
+    head sees the Sun, and a shorter outage (at the default geometry the noon band,
+    where the Sun is too near the yaw axis for the ground to solve yaw)."""
+    sep = float(scenario.get("sensors", {}).get("sun", {}).get("min_sun_separation_deg",
+                                                                10.0))
+    h = f"{min_gap_s / 3600:g} h"
+    return (f"Sun gap (≥ {h} without yaw): no Sun-sensor head sees the Sun",
+            f"yaw outage under {h}: Sun within {sep:g}° of the yaw axis (noon), or a dropout")
+
+
+def _eq55_deg(scenario: dict) -> float:
+    """Eq. 55's σ_yaw for this scenario, as summary.json's analytic_sigma_yaw_deg
+    and the console give it."""
+    from ..config import build
+    from ..config.loader import validate
+    from ..files.summary import eq55_sigma_yaw_deg
+    s = validate(scenario)
+    return eq55_sigma_yaw_deg(s, build.estimator_model(s)[0])
+
+
 def _dss_note(scenario: dict) -> str | None:
     """Why yaw NIS is small in DSS periods, with the filter's σ inflation for the DSS
     (``bridge.inputs.yaw_correlation_inflation``, the function the filter used)."""
@@ -78,12 +119,15 @@ def _dss_note(scenario: dict) -> str | None:
             f"so yaw NIS ≈ 1/{factor ** 2:.0f} here by design")
 
 
-def _errors_job(c: dict, gap, title: str, min_gap_s: float):
+def _errors_job(c: dict, gap, title: str, min_gap_s: float, scenario: dict,
+                summary: dict | None):
+    eq55 = _eq55_deg(scenario)
+    kwargs = {"paper_sigma_deg": eq55, "paper_sigma_label": f"Eq. 55: {eq55:.4f}°",
+              "gap_labels": _gap_labels(scenario, min_gap_s), "warnings": _warnings(summary)}
     if "err_real" not in c:
         series = {n: {"unit": UNITS[n], "estimate": c["x_real"][:, COLUMNS[n]],
                       "sigma": c["sigma"][:, COLUMNS[n]]} for n in UNITS}
-        return plot_estimates, (c["t_s"], gap, series, title, min_gap_s), \
-            {"paper_sigma_deg": PAPER_SIGMA_YAW_DEG}
+        return plot_estimates, (c["t_s"], gap, series, title, min_gap_s), kwargs
     series = {}
     for j, n in enumerate(UNITS):
         i = COLUMNS[n]
@@ -103,14 +147,16 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float):
             s["smoothed"] = c["err_smoothed"][:, i]
         if "err_ekf" in c:
             s["ekf"] = c["err_ekf"][:, i]
+            if "sigma_ekf" in c:
+                s["ekf_sigma"] = c["sigma_ekf"][:, i]
         if n == "yaw":
-            s["reference"] = (PAPER_SIGMA_YAW_DEG, "paper σ_yaw (Eq. 56)")
+            s["reference"] = (eq55, "σ_yaw, Eq. 55")
         series[n] = s
-    return plot_errors, (c["t_s"], gap, series, title, min_gap_s), \
-        {"paper_sigma_deg": PAPER_SIGMA_YAW_DEG}
+    return plot_errors, (c["t_s"], gap, series, title, min_gap_s), kwargs
 
 
-def _consistency_job(c: dict, gap, title: str, scenario: dict):
+def _consistency_job(c: dict, gap, title: str, scenario: dict, min_gap_s: float,
+                     summary: dict | None):
     nees = {k: c[f"nees_{k}"] for k in ("real", "linear") if f"nees_{k}" in c} or None
     for k in ("real", "linear"):
         if nees is not None and f"nees_{k}_max" in c:
@@ -121,18 +167,20 @@ def _consistency_job(c: dict, gap, title: str, scenario: dict):
         dss = (c["tel_sun_head"] == 0) & (c["yaw_present"] > 0.5)
     note = _dss_note(scenario) if dss is not None and dss.any() else None
     return plot_consistency, (c["t_s"], gap, nees, em.N_STATES, chi2_bounds(em.N_STATES),
-                              nis, chi2_bounds(1), title), {"dss": dss, "dss_note": note}
+                              nis, chi2_bounds(1), title), {
+        "dss": dss, "dss_note": note, "summary": summary, "warnings": _warnings(summary, "nees"),
+        "min_gap_s": min_gap_s, "gap_labels": _gap_labels(scenario, min_gap_s)}
 
 
-def _torques_job(c: dict, gap, title: str):
+def _torques_job(c: dict, gap, title: str, labels: dict):
     truth = {k: c["truth_model"][:, COLUMNS[k]] for k in TORQUE_NAMES} \
         if "truth_model" in c else None
     return plot_torques, (c["t_s"], gap, {k: c["x_real"][:, COLUMNS[k]] for k in TORQUE_NAMES},
                           {k: c["sigma"][:, COLUMNS[k]] for k in TORQUE_NAMES}, title), \
-        {"truth": truth}
+        {"truth": truth, **labels}
 
 
-def _telemetry_job(c: dict, gap, title: str):
+def _telemetry_job(c: dict, gap, title: str, labels: dict):
     measured = {n: c[f"tel_{n}_deg"] for n in ("roll", "pitch", "yaw") if f"tel_{n}_deg" in c}
     truth = None
     if "true_euler_deg" in c:
@@ -140,7 +188,7 @@ def _telemetry_job(c: dict, gap, title: str):
         truth = {"yaw": e[:, 0], "roll": e[:, 1], "pitch": e[:, 2]}
     wheels = {k[4:]: c[k] for k in c if k.startswith("tel_wheel") and k.endswith("_rpm")}
     return plot_telemetry_overview, (c["t_s"], measured, truth, wheels, gap, title), \
-        {"yaw_sigma": c.get("tel_yaw_sigma_deg"), "sun_head": c.get("tel_sun_head")}
+        {"yaw_sigma": c.get("tel_yaw_sigma_deg"), "sun_head": c.get("tel_sun_head"), **labels}
 
 
 def _run_builders(run_dir: Path) -> tuple[list[str], dict]:
@@ -154,12 +202,15 @@ def _run_builders(run_dir: Path) -> tuple[list[str], dict]:
     gap = c["yaw_present"] < 0.5
     # Sun gaps as summary.json counts them (not the noon outages).
     min_gap_s = 3600.0 * scenario["estimator"]["sun_gap_min_h"]
+    summary = _summary(run_dir)
+    labels = {"min_gap_s": min_gap_s, "gap_labels": _gap_labels(scenario, min_gap_s)}
     builders = {
-        "errors.png": lambda: _errors_job(c, gap, title, min_gap_s),
-        "estimates.png": lambda: _errors_job(c, gap, title, min_gap_s),
-        "consistency.png": lambda: _consistency_job(c, gap, title, scenario),
-        "torques.png": lambda: _torques_job(c, gap, title),
-        "telemetry_overview.png": lambda: _telemetry_job(c, gap, title),
+        "errors.png": lambda: _errors_job(c, gap, title, min_gap_s, scenario, summary),
+        "estimates.png": lambda: _errors_job(c, gap, title, min_gap_s, scenario, summary),
+        "consistency.png": lambda: _consistency_job(c, gap, title, scenario, min_gap_s,
+                                                    summary),
+        "torques.png": lambda: _torques_job(c, gap, title, labels),
+        "telemetry_overview.png": lambda: _telemetry_job(c, gap, title, labels),
     }
     names = figure_set(c)
     daily = run_dir / "daily.csv"
@@ -169,7 +220,8 @@ def _run_builders(run_dir: Path) -> tuple[list[str], dict]:
         rows = read_csv(daily)
         if len(rows["day"]) >= 3:
             names.append("season.png")
-            builders["season.png"] = lambda: (plot_season, (rows, title), {})
+            builders["season.png"] = lambda: (plot_season, (rows, title),
+                                              {"warnings": _warnings(summary)})
         if (run_dir / "trim_loop.csv").is_file():
             names.append("trim_loop.png")
             builders["trim_loop.png"] = lambda: (plot_trim_loop, (
@@ -225,7 +277,8 @@ def _run_jobs(run_dir: Path) -> list:
     out = run_dir / "plots"
     out.mkdir(exist_ok=True)
     for stale in set(RUN_FIGURES + SIMULATE_FIGURES) - set(names):
-        (out / stale).unlink(missing_ok=True)
+        if (out / stale).exists():   # (on a read-only run, no error naming a file it never had)
+            (out / stale).unlink()
     return [(*builders[name](), out / name) for name in names]
 
 

@@ -53,7 +53,7 @@ def make_run(seed: int = 1, n: int = N) -> dict:
     d = series["yaw"]["difference"]
     d *= YAW_DIFF_MAX / np.max(np.abs(d))
     series["yaw"]["real"] = series["yaw"]["linear"] + d
-    series["yaw"]["reference"] = (0.040, "paper σ_yaw (Eq. 56)")
+    series["yaw"]["reference"] = (0.0397, "σ_yaw, Eq. 55")
     # A start-up transient far outside everything else: it must be said, not hidden.
     series["yaw"]["real"][:20] = series["yaw"]["linear"][:20] = 0.67
     series["h"]["smoothed"] = None
