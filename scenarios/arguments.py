@@ -25,7 +25,9 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
 def _out_args(p: argparse.ArgumentParser, help: str, required: bool = True,
               force: str = "replace a non-empty --out") -> None:
     p.add_argument("--out", required=required, type=Path, help=help)
-    p.add_argument("--force", action="store_true", help=force)
+    p.add_argument("--force", action="count", default=0,
+                   help=force + "; only a directory of dynprop's own files, unless given "
+                   "twice (--force --force: whatever it holds)")
 
 
 def _scenario_command(sub, name: str, help: str, out: str | None = None,
@@ -119,10 +121,20 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("telemetry", type=Path, metavar="TELEMETRY.csv")
     est.add_argument("--scenario", required=True, help="scenario (e.g. the run's scenario.yaml)")
     est.add_argument("--truth", type=Path, metavar="TRUTH.csv",
-                     help="a truth.csv: also compute the errors, NEES and run's summary")
+                     help="a truth.csv (every sample, or a run's at output.interval_s): also "
+                     "compute the errors, NEES and run's summary, at the samples it has")
+    est.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                     help="override a scenario key (repeatable, after --tuned-from's); "
+                     "VALUE is YAML")
+    est.set_defaults(seed=None, duration_s=None)   # as load_with_overrides reads them
     _tuned_arg(est)
     _out_args(est, "new output directory")
     sub.add_parser("scenarios", help="list the bundled scenarios")
+    template = sub.add_parser("scenario-template", help="print a scenario as annotated YAML: "
+                              "every key with its value, unit, range and meaning")
+    template.add_argument("scenario", nargs="?", metavar="NAME",
+                          help="a bundled name or a YAML path whose values to print "
+                          "(default: the GOES-Next defaults)")
     _scenario_command(sub, "observability", "rank tables of the paper's Section 4")
     _scenario_command(sub, "covariance", "steady-state yaw accuracy of Section 6")
     _scenario_command(sub, "linearization", "linearization-validation report: Jacobian vs "

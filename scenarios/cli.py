@@ -97,63 +97,63 @@ def _cmd_run(args) -> int:
     with staged_run_dir(out, force=args.force) as stage:
         summary = run_to_directory(scenario, stage, montecarlo_case=case)
         _note_tuned(args, stage / "summary.json")
-    errs, sigs = summary["yaw_error_at_gap_end_deg"], summary["yaw_sigma_at_gap_end_deg"]
-    if len(errs) <= 6:
-        ends = ", ".join(f"{e:+.4f}" for e in errs) or "none"
-        sig = ", ".join(f"{e:.4f}" for e in sigs) or "none"
-        at_ends = f"at Sun-gap ends {ends} deg (filter sigma {sig}; "
-    else:
-        # A season of gap ends: the worst one, and where the rest are (daily.csv).
-        k = max(range(len(errs)), key=lambda i: abs(errs[i]) / sigs[i])
-        inside = sum(abs(e) <= 3 * s for e, s in zip(errs, sigs, strict=True))
-        at_ends = (f"{inside} of {len(errs)} Sun-gap ends within 3 sigma, worst "
-                   f"{errs[k]:+.4f} deg against sigma {sigs[k]:.4f} (daily.csv; ")
-    print(f"{scenario.name}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; {at_ends}"
-          f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f}); "
-          f"{time.perf_counter() - start:.1f} s")
-    e = summary.get("ekf")
-    if e is not None and e["yaw_error_at_gap_end_deg"] is not None:
-        ratios = [x / sg for x, sg in zip(e["yaw_error_at_gap_end_deg"],
-                                          e["yaw_sigma_at_gap_end_deg"], strict=True)]
-        worst = max(ratios, key=abs, default=None)
-        print(f"EKF: yaw error RMS {e['yaw_error_rms_deg']:.4f} deg; "
-              + (f"worst Sun-gap end {worst:+.2f} sigma (paper's filter "
-                 f"{max((x / sg for x, sg in zip(errs, sigs, strict=True)), key=abs):+.2f})"
-                 if worst is not None else "no Sun-gap end")
-              + f"; mean NEES {e['nees_mean']:.2f} (paper's {summary['nees_mean']:.2f})")
+    from .console import run_lines
+    for line in run_lines(scenario.name, summary, time.perf_counter() - start):
+        print(line)
     print(f"figures: {out}/plots/")
     return 0
 
 
 def _cmd_estimate(args) -> int:
-    from .config.loader import load_scenario
     from .files.rundir import check_out_dir, staged_run_dir
     from .run.estimate import estimate_inputs, estimate_to_directory
 
-    scenario = load_scenario(args.scenario, _tuned(args)[0])
+    # The telemetry, not the scenario's duration, sets how much is held in memory.
+    scenario = load_with_overrides(args, streams=True)
     check_out_dir(args.out, args.force)
     start = time.perf_counter()
     grid, truth = estimate_inputs(scenario, args.telemetry, args.truth)
-    sources = {"file": str(args.telemetry),
-               "truth_file": None if args.truth is None else str(args.truth)}
+    # Absolute: a later `trim`/`tune` on this directory finds them from anywhere.
+    sources = {"file": str(Path(args.telemetry).resolve()),
+               "truth_file": None if args.truth is None else str(Path(args.truth).resolve())}
     with staged_run_dir(args.out, force=args.force) as stage:
         summary = estimate_to_directory(scenario, grid, truth, stage, sources)
         _note_tuned(args, stage / "summary.json")
         written = sorted(p.relative_to(stage) for p in stage.rglob("*") if p.is_file())
     tel = summary["telemetry"]
+    gaps = tel.get("cadence_note") or (
+        f"{tel['missing_steps']} without a row, {tel['dropouts']} dropouts, longest "
+        f"{tel['longest_dropout_s']:g} s")
     print(f"{scenario.name}: filtered {tel['rows']} telemetry rows on {tel['filter_steps']} "
-          f"steps of {scenario.sample_interval_s:g} s ({tel['missing_steps']} without a row, "
-          f"{tel['dropouts']} dropouts, longest {tel['longest_dropout_s']:g} s) in "
+          f"steps of {scenario.sample_interval_s:g} s ({gaps}) in "
           f"{time.perf_counter() - start:.1f} s")
-    sig = ", ".join(f"{e:.4f}" for e in summary["yaw_sigma_at_gap_end_deg"]) or "none"
-    if summary["yaw_error_rms_deg"] is None:
-        print(f"filter yaw sigma at Sun-gap ends {sig} deg (Eq. 55: "
-              f"{summary['analytic_sigma_yaw_deg']:.4f}); no --truth, so no errors")
+    sigmas = summary["yaw_sigma_at_gap_end_deg"]
+    eq55 = f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f}"
+    if not sigmas:
+        at_ends = f"no Sun-gap end in the telemetry: gap-end yaw not tested ({eq55})"
+    elif summary["yaw_error_rms_deg"] is None:
+        at_ends = (f"filter yaw sigma at Sun-gap ends "
+                   f"{', '.join(f'{e:.4f}' for e in sigmas)} deg ({eq55})")
     else:
-        ends = ", ".join(f"{e:+.4f}" for e in summary["yaw_error_at_gap_end_deg"]) or "none"
-        print(f"yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; at Sun-gap ends {ends} "
-              f"deg (filter sigma {sig}; Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f}); "
-              f"NEES mean {summary['nees_mean']:.2f} (expected {summary['nees_dof']})")
+        errs = summary["yaw_error_at_gap_end_deg"]
+        judged = ", ".join("not tested (no truth row near it)" if e is None else f"{e:+.4f}"
+                           for e in errs)
+        within = summary["yaw_within_3sigma_at_gap_ends"]
+        verdict = ("none tested" if within is None else
+                   "within 3 sigma" if within else "NOT within 3 sigma")
+        at_ends = (f"at Sun-gap ends {judged} deg (filter sigma "
+                   f"{', '.join(f'{e:.4f}' for e in sigmas)}; {eq55}): {verdict}")
+    if summary["yaw_error_rms_deg"] is None:
+        print(f"{at_ends}; no --truth, so no errors")
+    else:
+        cadence = tel["compared_cadence_s"]
+        every = "" if cadence is None else f", every {cadence:g} s"
+        print(f"errors on the {tel['compared_rows']} samples the truth has a row for{every}: "
+              f"yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; {at_ends}; "
+              f"{summary['checks']['nees']['detail'].split(': ')[0]}: "
+              f"{summary['checks']['nees']['verdict']}")
+    for w in summary["warnings"]:
+        print(f"warning: {w['message']}")
     print(f"wrote {args.out}/: " + ", ".join(str(p) for p in written))
     return 0
 
@@ -167,8 +167,33 @@ def _cmd_scenarios(args) -> int:
     return 0
 
 
+def _cmd_scenario_template(args) -> int:
+    from .config.loader import load_scenario
+    from .config.template import template
+    sys.stdout.write(template(None if args.scenario is None else load_scenario(args.scenario)))
+    return 0
+
+
+def _check_writable(plots: Path) -> None:
+    """Refuse a run whose plots/ cannot be written, naming that directory, before a
+    figure is drawn (a read-only run would otherwise fail on whichever file the
+    drawing touches first, even one the run never had)."""
+    import tempfile
+    if not (plots.parent / "scenario.yaml").is_file():
+        return   # not a run directory: plot_run says so
+    where = plots if plots.is_dir() else plots.parent   # plots/ is made by the drawing
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".write-test.", dir=where)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise InputError(f"{where}: cannot write the figures there "
+                         f"({exc.strerror or exc})") from None
+
+
 def _cmd_plot(args) -> int:
     from .figures.run import plot_run
+    _check_writable(args.run_dir / "plots")
     if (args.run_dir / "montecarlo.json").is_file():
         from .montecarlo.runset import redraw
         written = redraw(args.run_dir)
@@ -215,13 +240,10 @@ def _cmd_observability(args) -> int:
 
 
 def _cmd_covariance(args) -> int:
-    from dynprop.estimator.covariance_report import covariance_report, format_covariance_report
+    from dynprop.estimator.covariance_report import format_covariance_report
 
-    from .config.build import estimator_model, estimator_sensor_specs
-    scenario = load_with_overrides(args)
-    params, noise = estimator_model(scenario)
-    print(format_covariance_report(covariance_report(params, noise,
-                                                     estimator_sensor_specs(scenario))))
+    from .bridge.covariance import scenario_covariance_report
+    print(format_covariance_report(scenario_covariance_report(load_with_overrides(args))))
     return 0
 
 
@@ -277,10 +299,15 @@ def _cmd_montecarlo(args) -> int:
         return 130
     _note_tuned(args, args.out / "montecarlo.json")
     s = result.summary
+    if result.cases > args.runs:
+        # A set only grows: montecarlo.json never drops a case it holds.
+        print(f"dynprop: note: the set in {args.out} holds {result.cases} cases; --runs "
+              f"{args.runs} adds none, and montecarlo.json summarizes all {result.cases} "
+              "(a smaller set needs another --out)", file=sys.stderr)
     verb = "resumed" if result.resumed else "new"
-    print(f"{scenario.name}: {verb} set, ran {result.ran} of {args.runs} cases "
-          f"({args.runs - result.ran} already stored) in {time.perf_counter() - start:.1f} s; "
-          f"{one_line(s)}")
+    print(f"{scenario.name}: {verb} set, ran {result.ran} of {result.cases} cases "
+          f"({result.cases - result.ran} already stored) in "
+          f"{time.perf_counter() - start:.1f} s; {one_line(s)}")
     for f in s["failed"]:
         print(f"  case {f['case']} failed: {f['error']}", file=sys.stderr)
     print(f"wrote {args.out}/montecarlo.json and {args.out}/plots/")
@@ -288,10 +315,33 @@ def _cmd_montecarlo(args) -> int:
 
 
 COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd_plot,
+            "scenario-template": _cmd_scenario_template,
             "run": _cmd_run, "estimate": _cmd_estimate,
             "observability": _cmd_observability, "covariance": _cmd_covariance,
             "linearization": _cmd_linearization, "montecarlo": _cmd_montecarlo,
             "trim": _cmd_trim, "tune": _cmd_tune}
+
+
+def os_error_line(exc: OSError, args) -> str:
+    """One line for a file that could not be read or written: the file (a staging
+    directory named by the directory it becomes), else the directory the command
+    writes; never an empty name (a full disk's write names no file)."""
+    import errno
+
+    from .files.rundir import public_path
+    why = exc.strerror or str(exc) or type(exc).__name__
+    if exc.filename is not None and exc.filename2 is not None:
+        where = f"{public_path(exc.filename)} -> {public_path(exc.filename2)}"
+    elif exc.filename is not None:
+        where = public_path(exc.filename)
+    else:
+        target = next((getattr(args, k) for k in ("out", "run_dir", "source")
+                       if getattr(args, k, None) is not None), None)
+        where = f"writing {target}" if target is not None else "dynprop"
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        why += " (free some space, or write elsewhere with --out)" \
+            if getattr(args, "out", None) is not None else " (free some space)"
+    return f"{where}: {why}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -311,7 +361,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except OSError as exc:
         # Files the user named (or their directories) could not be read or written.
-        print(f"dynprop: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        print(f"dynprop: error: {os_error_line(exc, args)}", file=sys.stderr)
         return 2
     except FloatingPointError as exc:
         # A valid scenario whose closed loop diverges (its gains, its step): not a

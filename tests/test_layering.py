@@ -41,7 +41,7 @@ RANKS = {
     "run": 4,
     "trim": 5, "linearization": 5, "montecarlo": 5, "tune": 5,
     "studies": 6,
-    "commands": 7, "arguments": 7,
+    "commands": 7, "arguments": 7, "console": 7,
     "cli": 8,
 }
 

@@ -31,7 +31,8 @@ class RunStatistics:
     filter's σ at each gap end inside the run; ``per_state`` is the mean of
     (error/σ)² per state on the NEES samples; ``comparison`` the real-against-
     linearized figures per error; ``nees_inside`` the fraction of NEES samples within
-    the 95% bounds; ``nis`` the mean NIS per measurement (roll, yaw, h)."""
+    the 95% bounds; ``nis`` the mean NIS per measurement (roll, yaw, h);
+    ``truth_max`` the truth's largest |roll| and |yaw| and when, (deg, s) per axis."""
 
     gaps: list[tuple[int, int]]
     end_sigma: list[float]
@@ -51,6 +52,7 @@ class RunStatistics:
     nees_inside: float | None = None
     nees_inside_linear: float | None = None
     nis_linear: dict[str, float | None] | None = None
+    truth_max: dict[str, tuple[float, float]] | None = None
 
 
 def eq55_sigma_yaw_deg(s: Scenario, params) -> float:
@@ -99,6 +101,10 @@ def assemble_summary(s: Scenario, params, backend: str, truth: bool, twin: bool,
         "nis_mean": f.nis,
         "nis_mean_linear": f.nis_linear,
         "nis_bounds_95_per_sample": chi2_bounds(1, 1),
+        "truth_max_abs_deg": (None if f.truth_max is None else
+                              {k: v[0] for k, v in f.truth_max.items()}),
+        "truth_max_abs_at_h": (None if f.truth_max is None else
+                               {k: v[1] / 3600.0 for k, v in f.truth_max.items()}),
     }
 
 

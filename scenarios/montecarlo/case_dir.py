@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config.schema import Scenario, resolved_yaml
+from ..files.checks import add_checks
 from ..files.columns import estimate_columns
 from ..files.comparison import comparison_arrays
 from ..files.csvio import BackgroundWriter
@@ -62,7 +63,7 @@ def case_to_directory(s: Scenario, stage: Path, case: int) -> dict:
         for w in writers:
             w.cancel()
         raise
-    write_summary(stage / "summary.json", summary)
+    write_summary(stage / "summary.json", add_checks(summary))
     return summary
 
 
@@ -84,6 +85,9 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
     summary["filters"] = ["paper", *extra]
     for name, r in extra.items():
         summary[name] = filter_summary(s, name, r, runs.truth_model, t, present)
+    # summary.json before the figures, which draw its verdicts and warnings; written
+    # again, complete, when the case is done.
+    write_summary(stage / "summary.json", add_checks(summary))
     from ..figures.run import plot_run_figures
     plot_run_figures(stage)
     return summary

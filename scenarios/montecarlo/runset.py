@@ -11,7 +11,7 @@ import numpy as np
 
 from ..config.schema import Scenario
 from .execute import connect, default_workers, run_dask, run_local
-from .stats import ensemble, quantile_label, runs_to_bound_quantile
+from .stats import ensemble, quantile_label, runs_to_bound_quantile, untested_why
 from .store import SetDirectory, atomic_write, npz_bytes
 
 FIGURES = ("mc_errors.png", "mc_nees.png", "mc_gap_yaw.png")
@@ -22,6 +22,7 @@ class SetResult:
     summary: dict
     ran: int          # cases run by this invocation
     resumed: bool     # the directory already held part of this set
+    cases: int        # cases in the set, and in montecarlo.json: n_runs or more
 
 
 def pending_cases(store: SetDirectory, n_runs: int, keep, retry_failed: bool) -> list[int]:
@@ -33,15 +34,18 @@ def pending_cases(store: SetDirectory, n_runs: int, keep, retry_failed: bool) ->
 
 
 def run_set(s: Scenario, n_runs: int, out: Path, workers: int | None = None,
-            scheduler: str | None = None, keep=(), force: bool = False,
+            scheduler: str | None = None, keep=(), force: int = 0,
             retry_failed: bool = False, command: str = "") -> SetResult:
     """Cases 0 … n_runs−1 of ``s``'s dispersions, skipping those already stored in
-    ``out``; then montecarlo.json, montecarlo.npz and the figures."""
+    ``out``; then montecarlo.json, montecarlo.npz and the figures.  A set that already
+    holds more cases keeps them all, and montecarlo.json summarizes them all: a
+    summary never drops a stored case (``SetResult.cases`` says how many)."""
     # Connect first: an unreachable scheduler must not leave a new directory behind.
     with connect(scheduler) if scheduler else contextlib.nullcontext() as client:
         store = SetDirectory(out)
         resumed = store.open(s, force)
         store.clean_temporaries()
+        n_runs = max(n_runs, 1 + max(store.records(), default=-1))
         keep = {k for k in keep if k < n_runs}
         todo = pending_cases(store, n_runs, keep, retry_failed)
         if todo:
@@ -51,7 +55,7 @@ def run_set(s: Scenario, n_runs: int, out: Path, workers: int | None = None,
             else:
                 run_local(s, todo, keep, workers or default_workers(), **kwargs)
     summary = write_results(s, store, n_runs, command)
-    return SetResult(summary, len(todo), resumed)
+    return SetResult(summary, len(todo), resumed, n_runs)
 
 
 def write_results(s: Scenario, store: SetDirectory, n_runs: int, command: str) -> dict:
@@ -109,12 +113,14 @@ def one_line(summary: dict) -> str:
     frac = n["fraction_after_convergence"]
     parts = [f"{summary['runs_ok']} runs ({summary['runs_failed']} failed)"]
     if frac is None:
-        parts.append(f"no NEES test: the run ends before {summary['converged_after_h']:g} h")
+        parts.append(f"NEES not tested ({untested_why(n)})")
     else:
         parts.append(f"averaged NEES {n['mean_after_convergence']:.2f} after "
                      f"{summary['converged_after_h']:g} h, inside [{lo:.2f}, {hi:.2f}] "
                      f"{100 * frac['inside']:.0f}% of the time (below "
                      f"{100 * frac['below']:.0f}%)")
+    if not summary["gap_end_yaw"]:
+        parts.append("yaw at Sun-gap ends not tested (no case has a Sun-gap end)")
     for g in summary["gap_end_yaw"]:
         parts.append(f"yaw at gap {g['gap']} end: {gap_quantiles(g)} vs filter σ "
                      f"{g['predicted_sigma_deg']:.4f} deg")

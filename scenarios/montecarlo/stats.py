@@ -169,7 +169,9 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
     b1 = chi2_bounds(1, m)
     summary["nees"] = {
         "dof": N_STATES, "runs": m, "bounds_95": list(bounds),
+        "converged_after_h": s.montecarlo.converged_after_h,
         "points_after_convergence": int(conv.sum()),
+        "last_point_h": float(t_s[-1] / 3600.0),
         "mean_after_convergence": _mean(nees_avg[conv]),
         "fraction_after_convergence": _fraction(nees_avg[conv], *bounds),
         "per_state_bounds_95": list(b1),
@@ -239,6 +241,13 @@ def per_state_test(n: dict) -> dict[str, str] | None:
             for k, v in states.items()}
 
 
+def untested_why(n: dict) -> str:
+    """Why a set has no NEES test: its grid has no point at or after the time from
+    which the filter counts as converged."""
+    return (f"no grid point at or after montecarlo.converged_after_h = "
+            f"{n['converged_after_h']:g} h: the last is at {n['last_point_h']:.3g} h")
+
+
 def diagnose(n: dict) -> str:
     """One sentence on where the averaged NEES sits and which states put it there
     (every state, grouped by ``per_state_test``); with the linear twin, whether the
@@ -246,7 +255,7 @@ def diagnose(n: dict) -> str:
     exactly)."""
     frac = n["fraction_after_convergence"]
     if frac is None:
-        return "the run ends before the convergence time: no NEES test"
+        return f"not tested ({untested_why(n)})"
     lo, hi = n["per_state_bounds_95"]
     states = n["per_state_mean_after_convergence"]
     test = per_state_test(n)

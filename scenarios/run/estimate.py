@@ -3,6 +3,7 @@ on a telemetry file, written as a run directory (docs/outputs.md)."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -12,14 +13,16 @@ from dynprop.estimator.transition import discretize
 from ..bridge.coordinates import model_truth, truth_torques
 from ..bridge.inputs import telemetry_inputs
 from ..config import build
-from ..config.schema import Scenario, resolved_yaml
+from ..config.schema import Scenario, output_stride, resolved_yaml
+from ..files.checks import add_checks
 from ..files.columns import estimate_columns
 from ..files.comparison import comparison_arrays
 from ..files.csvio import write_csv
 from ..files.summary import assemble_summary, write_summary
 from ..records import FilterHistory
-from ..samples import nees_rows, sun_gaps
+from ..samples import nees_rows, output_rows, sun_gaps
 from .ekf import other_filters
+from .estimate_truth import comparison_at_rows, filter_row_summary, row_statistics
 from .filter_tally import FilterTally
 from .statistics import nees_series, whole_run_statistics
 from .whole import TwoRuns, filter_telemetry
@@ -47,17 +50,35 @@ def filter_summary(s: Scenario, name: str, result, truth_model, t_s, present) ->
     return tally.summary()
 
 
+def _truth_section(truth, t, ends) -> dict:
+    """What summary.json's ``telemetry`` says of the truth the errors were computed
+    against: how many rows, at what cadence, and where each gap end was judged."""
+    if truth is None:
+        return {"truth_rows": None, "compared_rows": None, "compared_cadence_s": None,
+                "gap_end_compared_at_s": None}
+    steps = np.diff(t[truth.rows])
+    return {"truth_rows": truth.file_rows, "compared_rows": int(len(truth.rows)),
+            "compared_cadence_s": float(np.median(steps)) if steps.size else None,
+            "gap_end_compared_at_s": [None if r is None else float(t[r]) for _, r in ends]}
+
+
 def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) -> dict:
     """`dynprop estimate`: the filter and smoother on gridded telemetry
     (``estimate_inputs``), written as a run directory (scenario.yaml, estimate.csv,
     smoothed.csv, summary.json, comparison.npz, plots/) that `dynprop plot` redraws.
-    With the truth, the errors, NEES and the summary's error figures are those `run`
-    computes; there is no linear twin (it needs the simulation, not its files).
-    ``sources`` (the input files' names) goes into summary.json."""
+    estimate.csv and smoothed.csv hold the rows at ``output.interval_s``, as `run`'s;
+    every figure of the summary is computed at every sample.  With the truth, the
+    errors, NEES and the summary's error figures are those `run` computes, at the
+    samples the truth has a row for (``estimate_truth``; with a row at every sample,
+    exactly `run`'s); there is no linear twin (it needs the simulation, not its
+    files).  ``sources`` (the input files' names) goes into summary.json."""
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
     real, smoother_args = filter_telemetry(s, params, disc, *telemetry_inputs(s, grid.columns))
     smoothed = rts_smoother(real, disc, **smoother_args)
+    t = grid.columns["t_s"]
+    n = len(t)
+    sparse = truth is not None and not truth.every_sample(n)
     truth_model = None
     if truth is not None:
         tt = truth_torques(truth, s.estimator.model_torques, params.omega0_radps)
@@ -65,30 +86,53 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     runs = TwoRuns(None, None, params, truth_model, None, real, None, smoothed,
                    build.yaw_factors(s),
                    true_euler_rad=None if truth is None else truth.euler_rad)
-    t = grid.columns["t_s"]
     extra = other_filters(s, grid.columns)
     (stage / "scenario.yaml").write_text(resolved_yaml(s))
+    # The files at the output cadence, as `run` writes them (``samples.output_rows``).
+    stride = output_stride(s)
+    k = output_rows(0, n, stride)
     write_csv(stage / "estimate.csv",
-              estimate_columns(t, real.x, real.sigma, params.omega_n_radps))
+              estimate_columns(t[k], real.x[k], real.sigma[k], params.omega_n_radps))
     for name, r in extra.items():
         write_csv(stage / f"estimate_{name}.csv",
-                  estimate_columns(t, r.x, r.sigma, params.omega_n_radps))
+                  estimate_columns(t[k], r.x[k], r.sigma[k], params.omega_n_radps))
     write_csv(stage / "smoothed.csv",
-              estimate_columns(t, smoothed.x, smoothed.sigma, params.omega_n_radps))
+              estimate_columns(t[k], smoothed.x[k], smoothed.sigma[k], params.omega_n_radps))
     present = np.isfinite(grid.columns["yaw_deg"])
-    nees_data = nees_series(runs)
-    np.savez(stage / "comparison.npz",
-             **comparison_arrays(runs.comparison_inputs(extra), t, present, nees_data,
-                                 grid.columns))
-    summary = assemble_summary(s, params, real.backend, truth is not None, False,
-                               whole_run_statistics(s, runs, t, present, nees_data))
+    if sparse:
+        # The filter's own figures at every sample, the errors at the truth's rows.
+        rows = truth.rows
+        base = whole_run_statistics(s, dataclasses.replace(runs, truth_model=None), t,
+                                    present, nees_series(dataclasses.replace(
+                                        runs, truth_model=None)))
+        stats, ends, n_real = row_statistics(base, real, smoothed, truth_model, rows, t)
+        arrays = comparison_arrays(comparison_at_rows(runs, rows, extra), t[rows],
+                                   present[rows], (np.arange(len(rows)), n_real, None),
+                                   {c: v[rows] for c, v in grid.columns.items()})
+    else:
+        nees_data = nees_series(runs)
+        stats = whole_run_statistics(s, runs, t, present, nees_data)
+        arrays = comparison_arrays(runs.comparison_inputs(extra), t, present, nees_data,
+                                   grid.columns)
+        ends = [(b, b) for b in gap_ends(stats.gaps, n)]
+    np.savez(stage / "comparison.npz", **arrays)
+    summary = assemble_summary(s, params, real.backend, truth is not None, False, stats)
     summary["filters"] = ["paper", *extra]
     for name, r in extra.items():
-        summary[name] = filter_summary(s, name, r, truth_model, t, present)
+        summary[name] = (filter_row_summary(name, r, truth_model, truth.rows, ends) if sparse
+                         else filter_summary(s, name, r, truth_model, t, present))
     # One key set for every summary: `run`'s output keys, for a file filtered row by row.
-    summary.update(output_interval_s=s.sample_interval_s, telemetry_written=None, daily=None)
-    summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s)}
+    summary.update(output_interval_s=stride * s.sample_interval_s, telemetry_written=None,
+                   daily=None)
+    summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s),
+                            **_truth_section(truth, t, ends)}
+    # summary.json before the figures: they draw its verdicts and warnings.
+    write_summary(stage / "summary.json", add_checks(summary))
     from ..figures.run import plot_run_figures
     plot_run_figures(stage)
-    write_summary(stage / "summary.json", summary)
     return summary
+
+
+def gap_ends(gaps, n: int) -> list[int]:
+    """The ends of the Sun gaps ``gaps`` that end inside the grid's ``n`` samples."""
+    return [b for _, b in gaps if b < n]

@@ -67,7 +67,7 @@ class FilterTally:
             "h_error_rms_Nms": self.rms["h"].value() if truth else None,
             "yaw_error_at_gap_end_deg": self.end_err if truth else None,
             "yaw_sigma_at_gap_end_deg": self.end_sigma if truth else None,
-            "yaw_within_3sigma_at_gap_ends": self.within if truth else None,
+            "yaw_within_3sigma_at_gap_ends": self.within if truth and self.end_err else None,
             "nees_mean": self.nees.value() if truth else None,
             "nees_fraction_inside_95": (self.inside[0] / self.inside[1]
                                         if truth and self.inside[1] else None),

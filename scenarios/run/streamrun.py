@@ -20,6 +20,7 @@ from pathlib import Path
 
 from ..config import build
 from ..config.schema import Scenario, output_writes_telemetry, resolved_yaml
+from ..files.checks import add_checks
 from ..files.columns import estimate_columns
 from ..files.csvio import CsvAppender, write_csv
 from ..files.decimate import ComparisonRows
@@ -105,6 +106,21 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     # producer writes the last of its files; a steered run's figure also reads the
     # file the producer writes (trim_loop.csv), so that run draws after it.
     overlap = steering is None
+
+    def finished() -> dict:
+        """summary.json, written, once every window is in (and a steered run's
+        producer has written its trim_loop.csv)."""
+        summary = assemble_summary(s, params, tally.backend, True, True, tally.statistics(n))
+        summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
+                       daily="daily.csv")
+        summary["filters"] = list(s.estimator.filters)   # the paper's alone elsewhere
+        for name, (figs, _) in extra.items():
+            summary[name] = figs.summary()
+        if steering is not None:
+            summary.update(steering.summary(stage))
+        write_summary(stage / "summary.json", add_checks(summary))
+        return summary
+
     try:
         # The windows' records, and not one more: asking for the next would wait for
         # the producer to finish its files (stream.windows_of drains it there).
@@ -127,6 +143,9 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         bar.close()
         comparison.finish(stage / "comparison.npz", plan.stride * dt)
         write_csv(stage / "daily.csv", daily.columns())
+        if overlap:
+            # summary.json before the figures: they draw its verdicts and warnings.
+            summary = finished()
         with run_figures_drawn(stage) if overlap else contextlib.nullcontext():
             for _ in records:   # none left: the producer finishing its files
                 pass
@@ -139,15 +158,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         for _, file in extra.values():
             file.close()
         bar.close()
-    summary = assemble_summary(s, params, tally.backend, True, True, tally.statistics(n))
-    summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
-                   daily="daily.csv")
-    summary["filters"] = list(s.estimator.filters)   # the paper's alone elsewhere
-    for name, (figs, _) in extra.items():
-        summary[name] = figs.summary()
-    if steering is not None:
-        summary.update(steering.summary(stage))
     if not overlap:
+        summary = finished()
         plot_run_figures(stage)
-    write_summary(stage / "summary.json", summary)
     return summary

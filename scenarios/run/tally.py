@@ -20,6 +20,7 @@ from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 from ..files.summary import RunStatistics
 from ..records import Window
 from ..units import HOUR_S, RAD2DEG
+from .statistics import truth_extremes
 
 
 def _sq_sum(a) -> tuple[float, int]:
@@ -112,6 +113,7 @@ class RunTally:
         self.nis = {k: [Mean() for _ in range(3)] for k in ("real", "linear")}
         self.ends = {"err": [], "err_linear": [], "sigma": []}
         self.within = True
+        self.truth_max = {"roll": (0.0, 0.0), "yaw": (0.0, 0.0)}
         self.backend = None
         self.bounds = chi2_bounds(N_STATES, 1)
 
@@ -147,6 +149,9 @@ class RunTally:
             self.per_state = self.per_state + np.sum(ratio, axis=0)
             self.per_state_n += len(ratio)
             self._nees("real", nees_real)
+            top = truth_extremes(w.truth_model, w.t_s)
+            self.truth_max = {k: max(self.truth_max[k], top[k], key=lambda v: v[0])
+                              for k in top}
             if w.smoothed_x is not None:
                 self.rms["yaw_smoothed"].add(w.smoothed_x[:, Y] - w.truth_model[:, Y])
         if self.twin:
@@ -200,7 +205,7 @@ class RunTally:
                                   lambda: self.rms["yaw_smoothed"].value() * RAD2DEG),
             end_err=when(truth, lambda: self.ends["err"]),
             end_err_linear=when(twin, lambda: self.ends["err_linear"]),
-            ends_within=when(truth, lambda: self.within),
+            ends_within=when(truth and bool(self.ends["err"]), lambda: self.within),
             comparison=when(truth and twin, comparison),
             nees_mean=when(truth, lambda: float(self.nees["real"].total
                                                 / self.nees["real"].count)),
@@ -210,4 +215,5 @@ class RunTally:
             nees_inside_linear=when(twin, lambda: inside("linear")),
             nis_linear=when(twin, lambda: {m: self.nis["linear"][i].value()
                                            for i, m in enumerate(("roll", "yaw", "h"))}),
+            truth_max=when(truth, lambda: self.truth_max),
         )

@@ -421,12 +421,13 @@ def _swap_rows(lines: list[str], row: int) -> str:
 # name -> (file contents from the telemetry lines, or None for no file; text in the message)
 BAD_TELEMETRY = {
     "missing_file": (None, "no such telemetry file"),
-    "binary": (lambda lines: bytes(range(256)) * 8, "not a numeric CSV"),
-    "text": (lambda lines: "hello world\nthis is, not a telemetry file\n", "not a numeric CSV"),
+    "binary": (lambda lines: bytes(range(256)) * 8, "not a CSV text file"),
+    "text": (lambda lines: "hello world\nthis is, not a telemetry file\n",
+             "row 2 has 2 values, but the header (row 1) names 1 column"),
     "no_yaw_deg": (lambda lines: _drop_column(lines, "yaw_deg"), "yaw_deg"),
     "no_wheel2_rpm": (lambda lines: _drop_column(lines, "wheel2_rpm"), "wheel2_rpm"),
     "roll_not_a_number": (lambda lines: _set_cell(lines, 5, "roll_deg", "abc"),
-                          "not a numeric CSV"),
+                          "row 6, column roll_deg: 'abc' is not a number"),
     "wheel_missing_in_the_first_row": (lambda lines: _set_cell(lines, 1, "wheel1_rpm", ""),
                                        "first and the last row"),
     "t_s_missing": (lambda lines: _set_cell(lines, 7, "t_s", ""), "t_s"),

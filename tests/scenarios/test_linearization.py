@@ -229,11 +229,12 @@ def test_report_tables_equal_report_json(report_dir):
         for cell, v in zip(row[2:7], vals, strict=True):
             assert _close(cell, v), (row[0], cell, v)
     assert _close(budget_rows[-1][3], b["total"][col0]["torque_model_deg"])
-    est_rows = next(rows for _, rows in tables if rows and len(rows[0]) == 8 and
-                    rows[0][0] == "none" and rows[0][-1] in ("yes", "no"))
+    est_rows = next(rows for _, rows in tables if rows and len(rows[0]) == 10 and
+                    rows[0][0] == "none" and rows[0][7] in ("yes", "no"))
     for row, case in zip(est_rows, rep["sweep"]["cases"], strict=True):
         e = case["estimation"]
         assert _close(row[5], e["nees_mean_real"]) and _close(row[6], e["nees_mean_linear"])
+        assert row[8:] == [e["nees_verdict_real"], e["nees_verdict_linear"]]
         got = [float(x) for x in row[2].split(", ")]
         assert got == pytest.approx(e["yaw_error_gap_end_real_deg"], rel=PRINTED_REL)
 

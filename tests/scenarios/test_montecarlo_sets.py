@@ -372,13 +372,15 @@ def test_ensemble_settings_and_more_runs_resume_without_rerunning(twin_set, tmp_
     assert snapshot(old) == before
     assert (out / "cases" / "case-00003.json").is_file()
     assert json.loads((out / "montecarlo.json").read_text())["runs_ok"] == 4
-    # Fewer runs: the ensemble uses cases 0 … N−1 only, and nothing runs.
+    # Fewer runs: a set only grows. Nothing runs, every stored case is summarized,
+    # and the console says so (never a summary silently rewritten for fewer cases).
     rc, stdout, err = montecarlo(out, 2, *TWIN_SET)
-    assert rc == 0 and ran(stdout) == ("resumed", 0, 2)
+    assert rc == 0 and ran(stdout) == ("resumed", 0, 4)
+    assert "holds 4 cases; --runs 2 adds none" in err
     summary = json.loads((out / "montecarlo.json").read_text())
-    assert summary["runs_ok"] == 2 and summary["nees"]["runs"] == 2
+    assert summary["runs_ok"] == 4 and summary["nees"]["runs"] == 4
     # The same function of the same arguments (written through JSON, which round-trips).
-    assert summary["nees"]["bounds_95"] == pytest.approx(chi2_bounds(9, 2), rel=1e-12)
+    assert summary["nees"]["bounds_95"] == pytest.approx(chi2_bounds(9, 4), rel=1e-12)
 
 
 # --------------------------------------------------------------------------- 8. dask

@@ -1,0 +1,51 @@
+"""What `run` prints: the verdicts of summary.json's ``checks``, one line, then one
+line per warning.  Reads the summary only, so the console and the file agree."""
+
+from __future__ import annotations
+
+
+def _gap_ends(summary: dict) -> str:
+    errs, sigs = summary["yaw_error_at_gap_end_deg"], summary["yaw_sigma_at_gap_end_deg"]
+    check = summary["checks"]["gap_end_yaw_within_3sigma"]
+    if check["passed"] is None:
+        return f"Sun-gap-end yaw {check['detail']}"
+    verdict = "all within 3 sigma" if check["passed"] else "NOT all within 3 sigma"
+    if len(errs) <= 6:
+        ends = ", ".join(f"{e:+.4f}" for e in errs)
+        sig = ", ".join(f"{e:.4f}" for e in sigs)
+        return f"at Sun-gap ends {ends} deg (filter sigma {sig}): {verdict}"
+    # A season of gap ends: the worst one, and where the rest are (daily.csv).
+    return f"{check['detail']} (daily.csv)"
+
+
+def _real_minus_linear(summary: dict) -> str:
+    check = summary["checks"]["real_minus_linear"]
+    if check["passed"] is None:
+        return f"real - linearized {check['detail']}"
+    yaw = summary["nonlinear_vs_linear"]["yaw_deg"]
+    ok = "below" if check["passed"] else "ABOVE"
+    return (f"real - linearized yaw max {yaw['max_abs_difference']:.2g} deg, {ok} "
+            f"{check['limit_deg']:.2g} (10% of sigma)")
+
+
+def _nees(check: dict) -> str:
+    if check["passed"] is None:
+        return f"NEES {check['detail']}"
+    return check["detail"].split(": ")[0] + f": {check['verdict']}"
+
+
+def run_lines(name: str, summary: dict, seconds: float) -> list[str]:
+    """The console report of a run: its headline, then its warnings."""
+    parts = [f"yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg", _gap_ends(summary),
+             _real_minus_linear(summary), _nees(summary["checks"]["nees"]),
+             f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg", f"{seconds:.1f} s"]
+    lines = [f"{name}: " + "; ".join(parts)]
+    e = summary.get("ekf")
+    if e is not None and e["yaw_error_rms_deg"] is not None:
+        c = summary["checks"]
+        lines.append(f"EKF: yaw error RMS {e['yaw_error_rms_deg']:.4f} deg; "
+                     + _gap_ends({**e, "checks": {"gap_end_yaw_within_3sigma":
+                                                  c["ekf_gap_end_yaw_within_3sigma"]}})
+                     + "; " + _nees(c["ekf_nees"]))
+    lines += [f"warning: {w['message']}" for w in summary["warnings"]]
+    return lines

@@ -1,0 +1,174 @@
+"""The verdicts of a run or an estimate, and the warnings they raise: summary.json's
+``checks`` and ``warnings`` (docs/outputs.md).
+
+A verdict is computed from at least one sample of what it judges, or it is
+"not tested" with the reason: ``passed`` is then None (JSON null), never True.
+
+The limits are stated, with where they come from:
+
+- The linear range.  `dynprop linearization goes_next_equinox` (validation §4)
+  found Eq. 11 propagated beside the nonlinear truth accurate to 10% of the
+  filter's σ_yaw up to 0.19° of attitude error, and the paper's filter on the
+  nonlinear telemetry consistent at every Sun-gap end up to 3° (attitude and
+  nutation cone alike), but not at 10°.  A truth that goes further than 0.19°
+  from the nominal attitude is outside the range where the linearization was
+  checked accurate; further than 3°, outside where the filter was found to work.
+- Real − linearized.  The difference between the filter's errors on the
+  nonlinear truth and on the linear twin is what the linearization costs; above
+  10% of σ_yaw (Eq. 55, the scenario's) it is no longer negligible beside the
+  filter's own accuracy (the same 10% the linearization report uses).
+- NEES.  The mean over the run of the 9-state NEES against the 95% bounds of one
+  sample, χ²(9).  A time average of a consistent filter's NEES scatters less about
+  9 than one sample does, however correlated the samples, so outside those bounds
+  is a real departure and inside is no evidence either way (as the Monte Carlo
+  per-state test, ``montecarlo.stats.per_state_test``).
+"""
+
+from __future__ import annotations
+
+LINEAR_MODEL_RANGE_DEG = 0.19
+FILTER_TESTED_RANGE_DEG = 3.0
+REAL_MINUS_LINEAR_FRACTION = 0.1
+# A state whose mean (e/σ)² is below this is named as making the filter conservative.
+QUIET_STATE = 0.2
+
+_SOURCE = "`dynprop linearization goes_next_equinox`, docs/validation.md §4"
+
+
+def _check(passed, detail: str, **values) -> dict:
+    return {"passed": passed, "detail": detail, **values}
+
+
+def _not_tested(why: str, **values) -> dict:
+    return _check(None, f"not tested ({why})", **values)
+
+
+def gap_end_check(errors, sigmas) -> dict:
+    """Gap-end yaw against the filter's 3σ (``errors`` None: no truth)."""
+    if errors is None:
+        return _not_tested("no truth to compare with")
+    if not errors:
+        return _not_tested("no Sun-gap end in the run")
+    # A null error: `estimate --truth` had no truth row near that end to judge it by.
+    judged = [(e, s) for e, s in zip(errors, sigmas, strict=True) if e is not None]
+    if not judged:
+        return _not_tested("no truth row close enough to any Sun-gap end")
+    ratios = [e / s for e, s in judged]
+    worst = max(range(len(ratios)), key=lambda i: abs(ratios[i]))
+    inside = sum(abs(r) <= 3 for r in ratios)
+    skipped = len(errors) - len(judged)
+    return _check(inside == len(ratios),
+                  f"{inside} of {len(ratios)} Sun-gap ends within 3σ"
+                  + (f" ({skipped} not tested: no truth row near them)" if skipped else "")
+                  + f", worst {judged[worst][0]:+.4f}° = {ratios[worst]:+.2f}σ",
+                  ends=len(ratios), worst_over_sigma=ratios[worst])
+
+
+def nees_check(mean, bounds, per_state: dict | None, who: str = "the filter") -> dict:
+    """Mean NEES against the one-sample 95% bounds (module doc)."""
+    if mean is None:
+        return _not_tested("no truth to compare with", verdict="not tested")
+    lo, hi = bounds
+    head = f"mean NEES {mean:.2f} (expected 9; 95% bounds {lo:.2f}–{hi:.2f})"
+    states = per_state or {}
+    if mean > hi:
+        loud = ", ".join(f"{k} {v:.2g}" for k, v in states.items() if v > 1)
+        return _check(False, f"{head}: {who} is overconfident, its errors larger than its σ"
+                      + (f" (mean (e/σ)² above 1: {loud})" if loud else ""),
+                      verdict="overconfident")
+    if mean < lo:
+        quiet = ", ".join(f"{k} {v:.2g}" for k, v in states.items() if v < QUIET_STATE)
+        return _check(False, f"{head}: {who} is conservative, its σ larger than its errors"
+                      + (f" (mean (e/σ)² below {QUIET_STATE:g}: {quiet})" if quiet else ""),
+                      verdict="conservative")
+    return _check(True, f"{head}: consistent", verdict="consistent")
+
+
+def linear_range_check(max_deg: dict | None, at_h: dict | None) -> dict:
+    """How far the truth went from the nominal attitude (``max_deg``, roll and yaw,
+    reached at ``at_h``), against the linear range."""
+    if max_deg is None:
+        return _not_tested("no truth")
+    axis = max(("roll", "yaw"), key=lambda k: max_deg[k])
+    top, t_h = max_deg[axis], at_h[axis]
+    where = f"truth max |{axis}| {top:.3g}° at {_when(t_h)}"
+    values = {"limit_deg": LINEAR_MODEL_RANGE_DEG, "filter_tested_deg": FILTER_TESTED_RANGE_DEG,
+              "truth_max_abs_deg": top}
+    if top > FILTER_TESTED_RANGE_DEG:
+        return _check(False, f"{where}: beyond the {FILTER_TESTED_RANGE_DEG:g}° up to which "
+                      f"the paper's filter was found consistent ({_SOURCE}); the "
+                      "linearization is not checked here", **values)
+    if top > LINEAR_MODEL_RANGE_DEG:
+        return _check(False, f"{where}: beyond the {LINEAR_MODEL_RANGE_DEG:g}° up to which "
+                      f"Eq. 11 was found accurate to 10% of σ_yaw ({_SOURCE}; the filter "
+                      f"was found consistent up to {FILTER_TESTED_RANGE_DEG:g}°)", **values)
+    return _check(True, f"{where}: inside the {LINEAR_MODEL_RANGE_DEG:g}° where Eq. 11 was "
+                  "found accurate to 10% of σ_yaw", **values)
+
+
+def real_minus_linear_check(comparison: dict | None, sigma_deg: float) -> dict:
+    """The largest |real − linearized| yaw error against a fraction of σ_yaw."""
+    limit = REAL_MINUS_LINEAR_FRACTION * sigma_deg
+    if comparison is None:
+        return _not_tested("needs the truth and the linear twin", limit_deg=limit)
+    v = comparison["yaw_deg"]["max_abs_difference"]
+    rms = comparison["yaw_deg"]["rms_difference"]
+    text = (f"real − linearized yaw up to {v:.2g}° (RMS {rms:.2g}°) against "
+            f"{100 * REAL_MINUS_LINEAR_FRACTION:g}% of σ_yaw (Eq. 55: {sigma_deg:.4f}°), "
+            f"{limit:.2g}°")
+    if v > limit:
+        return _check(False, text + ": the nonlinear truth, not only the filter's model, "
+                      "sets part of the error here", limit_deg=limit, value_deg=v)
+    return _check(True, text, limit_deg=limit, value_deg=v)
+
+
+def _when(t_h: float) -> str:
+    return f"{t_h:.1f} h" if t_h < 72 else f"day {t_h / 24:.1f}"
+
+
+def run_checks(summary: dict) -> dict:
+    """The ``checks`` section from a summary's figures."""
+    per_state = summary.get("nees_mean_per_state")
+    checks = {
+        "gap_end_yaw_within_3sigma": gap_end_check(summary["yaw_error_at_gap_end_deg"],
+                                                   summary["yaw_sigma_at_gap_end_deg"]),
+        "nees": nees_check(summary["nees_mean"], summary["nees_bounds_95_per_sample"],
+                           per_state),
+        "linear_range": linear_range_check(summary.get("truth_max_abs_deg"),
+                                           summary.get("truth_max_abs_at_h")),
+        "real_minus_linear": real_minus_linear_check(summary["nonlinear_vs_linear"],
+                                                     summary["analytic_sigma_yaw_deg"]),
+    }
+    return checks
+
+
+def other_filter_checks(name: str, section: dict, bounds) -> dict:
+    """The gap-end and NEES verdicts of a filter beside the paper's (its summary
+    section, e.g. ``ekf``), keyed ``<name>_…``."""
+    who = f"the {name.upper()}"
+    return {f"{name}_gap_end_yaw_within_3sigma": gap_end_check(
+                section["yaw_error_at_gap_end_deg"], section["yaw_sigma_at_gap_end_deg"]),
+            f"{name}_nees": nees_check(section["nees_mean"], bounds, None, who=who)}
+
+
+def warnings_of(checks: dict) -> list[dict]:
+    """One warning per failed check, ``check`` naming it, ``message`` saying what and
+    why.  An untested check is no warning: its own detail says why it is untested."""
+    return [{"check": name, "message": c["detail"]}
+            for name, c in checks.items() if c["passed"] is False]
+
+
+def add_checks(summary: dict) -> dict:
+    """``summary`` with ``checks`` and ``warnings`` (the paper's filter's, then each
+    other filter's in ``filters``)."""
+    # Last in the file, however often added: one key order for every summary.
+    summary.pop("checks", None)
+    summary.pop("warnings", None)
+    checks = run_checks(summary)
+    for name in summary.get("filters", ()):
+        if name != "paper" and isinstance(summary.get(name), dict):
+            checks.update(other_filter_checks(name, summary[name],
+                                              summary["nees_bounds_95_per_sample"]))
+    summary["checks"] = checks
+    summary["warnings"] = warnings_of(checks)
+    return summary
