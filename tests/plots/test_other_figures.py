@@ -13,25 +13,9 @@ from plots.linearization import plot_estimation
 from plots.montecarlo import plot_ensemble_errors, plot_ensemble_nees, plot_gap_end_yaw
 from plots.trim import plot_trim
 
+from .legend_checks import legend_clear_of_axes_and_caption
+
 SIDEREAL_DAY_S = 86164.0
-
-
-def _overlap(a, b) -> bool:
-    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
-
-
-def _legend_clear_of_axes_and_caption(fig) -> None:
-    """One figure legend; no legend inside a panel; the legend's box meets neither any
-    panel nor the caption text at the foot of the figure."""
-    fig.canvas.draw()
-    r = fig.canvas.get_renderer()
-    assert all(ax.get_legend() is None for ax in fig.axes)
-    (legend,) = fig.legends
-    box = legend.get_window_extent(r)
-    for ax in fig.axes:
-        assert not _overlap(box, ax.get_window_extent(r)), ax.get_ylabel()
-    for t in fig.texts:
-        assert not _overlap(box, t.get_window_extent(r)), t.get_text()
 
 
 # --------------------------------------------------------------------------- trim.png
@@ -71,7 +55,7 @@ def test_trim_band_is_three_sigma_of_kappa_and_the_legend_is_off_the_curves():
             assert 6 * sigma / (hi - lo) > 0.02
         assert fig.axes[-1].get_xlabel().startswith("time (")
         assert fig.axes[-1].get_xlim() == pytest.approx((t[0] / 3600, t[-1] / 3600))
-        _legend_clear_of_axes_and_caption(fig)
+        legend_clear_of_axes_and_caption(fig)
     finally:
         plt.close(fig)
 
@@ -102,7 +86,7 @@ def test_mc_figures_legend_below_the_panels_and_time_axis_laid_out(which):
            if which == "errors" else
            plot_ensemble_nees(d, summary, 6.0, "caption: scenario, seed, command"))
     try:
-        _legend_clear_of_axes_and_caption(fig)
+        legend_clear_of_axes_and_caption(fig)
         ax = fig.axes[-1]
         assert ax.get_xlabel().startswith("time (")
         assert ax.get_xlim() == pytest.approx((0.0, d["t_s"][-1] / 3600))
@@ -124,7 +108,7 @@ def test_mc_gap_end_figure_without_a_gap_end_says_not_tested():
         texts = [t.get_text() for t in fig.axes[0].texts]
         assert any(s.startswith("not tested: no Sun gap ends within the runs")
                    and "6 h" in s for s in texts), texts
-        _legend_clear_of_axes_and_caption(fig)
+        legend_clear_of_axes_and_caption(fig)
     finally:
         plt.close(fig)
 

@@ -8,6 +8,8 @@ import pytest
 
 from plots.season import continuous_day, outside_3sigma, plot_season
 
+from .legend_checks import legend_clear_of_axes_and_caption
+
 
 def _year(n=365, start_doy=79):
     rng = np.random.default_rng(4)
@@ -95,23 +97,13 @@ def _month(n=30):
     return daily
 
 
-def _boxes_overlap(a, b) -> bool:
-    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
-
-
 @pytest.mark.parametrize("make", [_year, _month])
 def test_the_legend_sits_outside_every_panel(make):
     """One legend for the figure, drawn where no axes are: it cannot cover days
     103–108 (or any data) of any panel."""
     fig = plot_season(make(), "legend")
     try:
-        fig.canvas.draw()
-        renderer = fig.canvas.get_renderer()
-        assert all(ax.get_legend() is None for ax in fig.axes)
-        (legend,) = fig.legends
-        box = legend.get_window_extent(renderer)
-        for ax in fig.axes:
-            assert not _boxes_overlap(box, ax.get_window_extent(renderer)), ax.get_ylabel()
+        legend_clear_of_axes_and_caption(fig)
     finally:
         plt.close(fig)
 
