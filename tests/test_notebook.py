@@ -1,9 +1,10 @@
 """examples/quickstart.ipynb runs headless, top to bottom, in the test suite (issue 17),
 and is committed without outputs.
 
-It runs as the README opens it (issue 29): by the venv's `jupyter`, called by its path,
-with the venv's bin directory not on PATH.  A `dynprop` found on PATH would hide a
-notebook that shells out to it, so PATH leads with a decoy that fails loudly."""
+It runs as the README opens it (issue 29): by the venv's `jupyter nbconvert --execute`,
+called by its path, with the venv's bin directory not on PATH.  A `dynprop` found on
+PATH would hide a notebook that shells out to it, so PATH leads with a decoy that fails
+loudly."""
 
 from __future__ import annotations
 
@@ -40,9 +41,9 @@ def test_quickstart_notebook_runs_without_the_venv_on_path(tmp_path):
         # `make test` turns warnings into errors, the kernel's too; ipykernel's own
         # warning in its shutdown handler would then stop the kernel from exiting.
         env["PYTHONWARNINGS"] += ",ignore::PendingDeprecationWarning:ipykernel.kernelbase"
-    proc = subprocess.run([str(bin_dir / "jupyter"), "execute", "--output", "executed",
-                           "quickstart.ipynb"], cwd=work, env=env, capture_output=True,
-                          text=True, timeout=1800)
+    proc = subprocess.run([str(bin_dir / "jupyter"), "nbconvert", "--to", "notebook",
+                           "--execute", "--output", "executed", "quickstart.ipynb"],
+                          cwd=work, env=env, capture_output=True, text=True, timeout=1800)
     assert proc.returncode == 0, proc.stderr[-4000:]
     done = nbformat.read(work / "executed.ipynb", as_version=4)
     outputs = [o for c in done.cells if c.cell_type == "code" for o in c.outputs]
