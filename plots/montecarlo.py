@@ -106,15 +106,16 @@ def plot_ensemble_nees(d: dict, summary: dict, converged_h: float, caption: str)
     fig, axes = plt.subplots(2, 1, figsize=(11, 9.5), sharex=True, constrained_layout=True)
     ax = axes[0]
     _shade(ax, d["gaps_h"])
-    ax.plot(t_h, d["nees_avg"], color="C0", lw=1,
+    # Black and grey: the per-state panel below uses the colour cycle, one per state.
+    ax.plot(t_h, d["nees_avg"], color="k", lw=1,
             label="averaged NEES, nonlinear truth "
             f"({_inside(n['fraction_after_convergence'], converged_h)})")
     if "nees_avg_linear" in d:
-        ax.plot(t_h, d["nees_avg_linear"], color="C2", lw=1, ls="--",
+        ax.plot(t_h, d["nees_avg_linear"], color="0.5", lw=1, ls="--",
                 label="averaged NEES, linear twin "
                 f"({_inside(n['linear']['fraction_after_convergence'], converged_h)})")
     if "nees_avg_ekf" in d:
-        ax.plot(t_h, d["nees_avg_ekf"], color="C4", lw=1, ls=":",
+        ax.plot(t_h, d["nees_avg_ekf"], color="k", lw=1.2, ls=":",
                 label="averaged NEES, EKF "
                 f"({_inside(summary['ekf']['nees']['fraction_after_convergence'], converged_h)})")
     ax.axhspan(lo, hi, color="C1", alpha=0.2,
