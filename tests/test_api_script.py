@@ -20,6 +20,9 @@ import pytest
 
 import dynprop
 
+# Whole commands checked for their wiring: the compiled pass runs them (conftest).
+pytestmark = pytest.mark.surface
+
 REPO = Path(__file__).resolve().parents[1]
 MARK = "dynprop-example-script-started"
 

@@ -14,6 +14,10 @@ import sys
 from pathlib import Path
 
 import nbformat
+import pytest
+
+# Whole commands checked for their wiring: the compiled pass runs them (conftest).
+pytestmark = pytest.mark.surface
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "quickstart.ipynb"
 DECOY = "#!/bin/sh\necho 'dynprop from PATH: the notebook must not rely on PATH' >&2\nexit 3\n"

@@ -17,6 +17,9 @@ from scenarios.files.csvio import read_csv
 
 from .test_cli_run import GAP_EPOCH, run_cli
 
+# Whole commands checked for their wiring: the compiled pass runs them (conftest).
+pytestmark = pytest.mark.surface
+
 DT = 0.512
 ROW_S = 64.0                       # output.interval_s by default: 125 samples
 SIX_H = 21600

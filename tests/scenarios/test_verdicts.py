@@ -19,6 +19,9 @@ from scenarios.montecarlo.runset import one_line
 
 from .test_cli_run import run_cli
 
+# Whole commands checked for their wiring: the compiled pass runs them (conftest).
+pytestmark = pytest.mark.surface
+
 SIX_H = "21600"
 # A verdict under one of these keys is a judgement, and must rest on evidence.
 VERDICTS = {"passed", "inside", "within_3sigma_at_gap_ends", "ekf_within_3sigma_at_gap_ends",
