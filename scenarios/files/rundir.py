@@ -51,17 +51,22 @@ def names_file(path: Path | str) -> Iterator[None]:
 
 # What dynprop writes into the directories it makes (run, estimate, simulate,
 # linearization, montecarlo, tune, trim): `--force` replaces a directory that holds
-# nothing else.  Figures are dynprop's by their extension (they are named after what
-# they show, and come and go with the run); data files by their very names, so that
-# a user's own CSV or notes are never taken for a run's.
+# nothing else.  Files, figures included, are dynprop's by their very names, so that
+# a user's own CSV, notes or pictures are never taken for a run's (tests/scenarios/
+# test_messages.py checks this list against the names the commands write).
+OWN_FIGURES = frozenset((
+    "errors.png", "estimates.png", "consistency.png", "torques.png",
+    "telemetry_overview.png", "season.png", "trim_loop.png", "truth.png", "telemetry.png",
+    "mc_errors.png", "mc_nees.png", "mc_gap_yaw.png", "coefficients.png",
+    "divergence_time.png", "divergence_sweep.png", "budget.png", "estimation.png",
+    "trim.png", "tune.png"))
 OWN_FILES = frozenset((
     "scenario.yaml", "case_scenario.yaml", "summary.json", "truth.csv", "telemetry.csv",
     "estimate.csv", "smoothed.csv", "daily.csv", "comparison.npz", "trim_loop.csv",
     "montecarlo.json", "montecarlo.npz", "montecarlo_case.json", "montecarlo_case.npz",
     "report.json", "report.md", "tune.json", "tune.md", "tuned_noise.yaml", "trim.json",
-    "trim.md"))
-_OWN_PATTERN = re.compile(r"^(estimate_[a-z0-9_]+\.csv|[a-z0-9_]+\.png|"
-                          r"case-\d+\.(json|npz|full\.npz))$")
+    "trim.md")) | OWN_FIGURES
+_OWN_PATTERN = re.compile(r"^(estimate_[a-z0-9_]+\.csv|case-\d+\.(json|npz|full\.npz))$")
 OWN_DIRS = frozenset(("plots", "cases", "trim", "tune", "verify"))
 # Temporaries of a write killed half way: ``.NAME.XXXXXXXX`` (montecarlo.store's
 # atomic_write) and ``.NAME.tmp`` (figures.save_figure).

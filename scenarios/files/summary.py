@@ -52,6 +52,7 @@ class RunStatistics:
     nees_inside: float | None = None
     nees_inside_linear: float | None = None
     nis_linear: dict[str, float | None] | None = None
+    nees_mean_settled: float | None = None
     truth_max: dict[str, tuple[float, float]] | None = None
 
 
@@ -95,6 +96,7 @@ def assemble_summary(s: Scenario, params, backend: str, truth: bool, twin: bool,
         "nonlinear_vs_linear": f.comparison,
         "nees_mean": f.nees_mean,
         "nees_mean_linear": f.nees_mean_linear,
+        "nees_mean_after_1h": f.nees_mean_settled,
         "nees_dof": N_STATES, "nees_bounds_95_per_sample": nees_b,
         "nees_fraction_inside_95": f.nees_inside,
         "nees_fraction_inside_95_linear": f.nees_inside_linear,

@@ -87,6 +87,11 @@ def estimation_sentences(report) -> list[str]:
     else:
         parts.append(f"Its NEES stays at or below its 95% bound {hi:.3g} over the whole "
                      "sweep.")
+    low = [c for c in cases if c["estimation"].get("nees_verdict_real") == "conservative"]
+    if low:
+        parts.append(f"In {len(low)} of {len(cases)} cases it is below its lower bound "
+                     f"{chi2_bounds(N_STATES, 1)[0]:.3g}: conservative, its σ larger than its "
+                     "errors.")
     return parts
 
 

@@ -46,7 +46,8 @@ def filter_summary(s: Scenario, name: str, result, truth_model, t_s, present) ->
     history = FilterHistory(result.x, result.sigma, result.innovations, result.innovation_var,
                             result.backend, P_nees=result.P_packed[nees_rows(0, len(t_s))])
     tally = FilterTally(name)
-    tally.add(history, 0, truth_model, [(a, b) for a, b in gaps if b < len(t_s)])
+    tally.add(history, 0, truth_model, [(a, b) for a, b in gaps if b < len(t_s)],
+              t_s - t_s[0])
     return tally.summary()
 
 
@@ -119,7 +120,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     summary = assemble_summary(s, params, real.backend, truth is not None, False, stats)
     summary["filters"] = ["paper", *extra]
     for name, r in extra.items():
-        summary[name] = (filter_row_summary(name, r, truth_model, truth.rows, ends) if sparse
+        summary[name] = (filter_row_summary(name, r, truth_model, truth.rows, ends, t) if sparse
                          else filter_summary(s, name, r, truth_model, t, present))
     # One key set for every summary: `run`'s output keys, for a file filtered row by row.
     summary.update(output_interval_s=stride * s.sample_interval_s, telemetry_written=None,

@@ -73,7 +73,7 @@ def row_statistics(base: RunStatistics, real, smoothed, truth_model: np.ndarray,
     with the error figures at the common ``rows`` against ``truth_model`` (there).
     Also returns each gap end with the row it was judged at (``gap_end_rows``) and
     the NEES at each common row."""
-    from .statistics import truth_extremes
+    from .statistics import SETTLED_S, mean_or_none, truth_extremes
     x, sig = real.x[rows], real.sigma[rows]
     err = x - truth_model
     n_real = nees(x, unpack(real.P_packed[rows]), truth_model)
@@ -91,12 +91,13 @@ def row_statistics(base: RunStatistics, real, smoothed, truth_model: np.ndarray,
         ends_within=bool(all(abs(err[i, Y]) <= 3 * sig[i, Y] for i in tested))
         if tested else None,
         nees_mean=float(np.mean(n_real)),
+        nees_mean_settled=mean_or_none(n_real[t_s[rows] >= t_s[0] + SETTLED_S]),
         nees_inside=fraction_inside(n_real, chi2_bounds(N_STATES, 1)),
         truth_max=truth_extremes(truth_model, t_s[rows]))
     return stats, ends, n_real
 
 
-def filter_row_summary(name: str, result, truth_model, rows, ends) -> dict:
+def filter_row_summary(name: str, result, truth_model, rows, ends, t_s) -> dict:
     """summary.json's section of a filter besides the paper's: its errors at the
     common ``rows`` and at the gap ends judged there (``ends`` from
     ``gap_end_rows``; null where not tested), its σ at the gap ends themselves; its
@@ -106,7 +107,7 @@ def filter_row_summary(name: str, result, truth_model, rows, ends) -> dict:
     tested = [(0, pos[r]) for _, r in ends if r is not None]
     tally = FilterTally(name)
     tally.add(at_rows(result, rows, result.P_packed[rows][nees_rows(0, len(rows))]), 0,
-              truth_model, tested)
+              truth_model, tested, t_s[rows] - t_s[0])
     out = tally.summary()
     judged = iter(out["yaw_error_at_gap_end_deg"])
     out["yaw_error_at_gap_end_deg"] = [None if r is None else next(judged) for _, r in ends]

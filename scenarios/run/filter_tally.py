@@ -13,6 +13,7 @@ from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 from ..records import FilterHistory
 from ..samples import nees_rows
 from ..units import RAD2DEG
+from .statistics import SETTLED_S
 from .tally import Mean, Rms
 
 EKF_MEASUREMENTS = ("roll", "pitch", "yaw", "h")
@@ -23,6 +24,7 @@ class FilterTally:
         self.name, self.measurements = name, measurements
         self.rms = {k: Rms() for k in ("yaw", "roll", "h")}
         self.nees, self.inside = Mean(), [0, 0]
+        self.nees_settled = Mean()      # after the start-up (statistics.SETTLED_S)
         self.nis = [Mean() for _ in measurements]
         self.end_err: list[float] = []
         self.end_sigma: list[float] = []
@@ -30,10 +32,11 @@ class FilterTally:
         self.backend = None
         self.bounds = chi2_bounds(N_STATES, 1)
 
-    def add(self, f: FilterHistory, start: int, truth_model: np.ndarray | None, closed_gaps
-            ) -> None:
+    def add(self, f: FilterHistory, start: int, truth_model: np.ndarray | None, closed_gaps,
+            t_s: np.ndarray | None = None) -> None:
         """One window's history of this filter from sample ``start`` on, against the
-        truth in the model's states (None without a truth)."""
+        truth in the model's states (None without a truth); ``t_s`` the window's times
+        (since the run's start), for the NEES after the start-up."""
         self.backend = f.backend
         a = start
         v = nis(f.innovations, f.innovation_var)
@@ -53,6 +56,8 @@ class FilterTally:
         k = nees_rows(a, a + len(f.x)) - a
         values = nees(f.x[k], unpack(f.P_nees), truth_model[k])
         self.nees.add(values)
+        if t_s is not None:
+            self.nees_settled.add(values[t_s[k] >= SETTLED_S])
         finite = values[np.isfinite(values)]
         self.inside[0] += int(np.sum((finite >= self.bounds[0]) & (finite <= self.bounds[1])))
         self.inside[1] += finite.size
@@ -69,6 +74,7 @@ class FilterTally:
             "yaw_sigma_at_gap_end_deg": self.end_sigma if truth else None,
             "yaw_within_3sigma_at_gap_ends": self.within if truth and self.end_err else None,
             "nees_mean": self.nees.value() if truth else None,
+            "nees_mean_after_1h": self.nees_settled.value() if truth else None,
             "nees_fraction_inside_95": (self.inside[0] / self.inside[1]
                                         if truth and self.inside[1] else None),
             "nis_mean": {m: self.nis[i].value() for i, m in enumerate(self.measurements)},

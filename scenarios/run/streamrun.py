@@ -135,7 +135,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
             estimate.append(estimate_columns(w.t_s[k], w.real.x[k], w.real.sigma[k],
                                              params.omega_n_radps))
             for name, (figs, file) in extra.items():
-                figs.add(w.filters[name], w.start, w.truth_model, closed)
+                figs.add(w.filters[name], w.start, w.truth_model, closed, w.t_s)
                 file.append(estimate_columns(w.t_s[k], w.filters[name].x[k],
                                              w.filters[name].sigma[k], params.omega_n_radps))
             bar.update(w.stop * dt / DAY_S)

@@ -20,7 +20,7 @@ from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 from ..files.summary import RunStatistics
 from ..records import Window
 from ..units import HOUR_S, RAD2DEG
-from .statistics import truth_extremes
+from .statistics import SETTLED_S, truth_extremes
 
 
 def _sq_sum(a) -> tuple[float, int]:
@@ -109,6 +109,7 @@ class RunTally:
         self.max_diff = {k: 0.0 for k in self.cmp}
         self.per_state, self.per_state_n = np.zeros(N_STATES), 0
         self.nees = {k: Mean() for k in ("real", "linear")}
+        self.nees_settled = Mean()      # the real run's, after the start-up (checks.py)
         self.nees_inside = {k: [0, 0] for k in ("real", "linear")}
         self.nis = {k: [Mean() for _ in range(3)] for k in ("real", "linear")}
         self.ends = {"err": [], "err_linear": [], "sigma": []}
@@ -149,6 +150,7 @@ class RunTally:
             self.per_state = self.per_state + np.sum(ratio, axis=0)
             self.per_state_n += len(ratio)
             self._nees("real", nees_real)
+            self.nees_settled.add(nees_real[nees_idx * self.s.sample_interval_s >= SETTLED_S])
             top = truth_extremes(w.truth_model, w.t_s)
             self.truth_max = {k: max(self.truth_max[k], top[k], key=lambda v: v[0])
                               for k in top}
@@ -211,6 +213,7 @@ class RunTally:
                                                 / self.nees["real"].count)),
             nees_mean_linear=when(twin, lambda: float(self.nees["linear"].total
                                                       / self.nees["linear"].count)),
+            nees_mean_settled=when(truth, self.nees_settled.value),
             nees_inside=when(truth, lambda: inside("real")),
             nees_inside_linear=when(twin, lambda: inside("linear")),
             nis_linear=when(twin, lambda: {m: self.nis["linear"][i].value()

@@ -26,6 +26,12 @@ SIX_H = "21600"
 # A verdict under one of these keys is a judgement, and must rest on evidence.
 VERDICTS = {"passed", "inside", "within_3sigma_at_gap_ends", "ekf_within_3sigma_at_gap_ends",
             "yaw_within_3sigma_at_gap_ends", "consistent", "converged", "move"}
+# What a verdict on the mean NEES reads, from that mean and the χ²(9) points.
+
+
+def nees_verdict(m: float) -> str:
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 9)
+    return "overconfident" if m > hi else "conservative" if m < lo else "not rejected"
 
 
 def _numbers(d: dict) -> list[float]:
@@ -66,9 +72,10 @@ def test_the_evidence_walker_catches_a_vacuous_true():
 
 @pytest.fixture(scope="module")
 def six_hours(tmp_path_factory):
+    """6 h with the EKF beside the paper's filter: both filters' verdicts."""
     out = tmp_path_factory.mktemp("six") / "run"
     rc, stdout, stderr = run_cli("run", "goes_next_equinox", "--duration-s", SIX_H,
-                                 "--out", str(out))
+                                 "--set", "estimator.filters=[paper, ekf]", "--out", str(out))
     assert rc == 0, stderr
     return out, stdout
 
@@ -76,10 +83,12 @@ def six_hours(tmp_path_factory):
 def test_run_without_a_gap_end_says_not_tested(six_hours):
     out, stdout = six_hours
     s = json.loads((out / "summary.json").read_text())
-    assert s["yaw_error_at_gap_end_deg"] == []
+    assert s["yaw_error_at_gap_end_deg"] == [] and s["ekf"]["yaw_error_at_gap_end_deg"] == []
     assert s["yaw_within_3sigma_at_gap_ends"] is None
-    c = s["checks"]["gap_end_yaw_within_3sigma"]
-    assert c["passed"] is None and c["detail"].startswith("not tested (")
+    assert s["ekf"]["yaw_within_3sigma_at_gap_ends"] is None
+    for name in ("gap_end_yaw_within_3sigma", "ekf_gap_end_yaw_within_3sigma"):
+        c = s["checks"][name]
+        assert c["passed"] is None and c["detail"].startswith("not tested ("), name
     assert vacuous(s) == []
     head = stdout.splitlines()[0]
     assert "not tested (no Sun-gap end in the run)" in head
@@ -92,11 +101,13 @@ def test_run_console_gives_real_minus_linearized_and_the_nees_verdict(six_hours)
     head = stdout.splitlines()[0]
     yaw = s["nonlinear_vs_linear"]["yaw_deg"]
     assert f"real - linearized yaw max {yaw['max_abs_difference']:.2g} deg" in head
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 9)
-    m = s["nees_mean"]
-    expected = "overconfident" if m > hi else "conservative" if m < lo else "consistent"
+    m = s["nees_mean_after_1h"]
+    assert m is not None and m != s["nees_mean"]      # the first hour left out
+    expected = nees_verdict(m)
     assert s["checks"]["nees"]["verdict"] == expected
-    assert f"mean NEES {m:.2f}" in head and f": {expected};" in head
+    assert s["checks"]["ekf_nees"]["verdict"] == nees_verdict(s["ekf"]["nees_mean_after_1h"])
+    assert f"mean NEES after the first hour {m:.2f}" in head and f": {expected};" in head
+    assert stdout.splitlines()[1].startswith("EKF: ")
 
 
 def test_warnings_are_the_failed_checks_printed_and_in_the_summary(six_hours):
@@ -132,9 +143,23 @@ def test_nees_check_against_chi2_points():
     assert checks.nees_check(lo * 0.99, bounds, per_state)["verdict"] == "conservative"
     assert "N_px_Nm 0.01" in checks.nees_check(lo * 0.99, bounds, per_state)["detail"]
     ok = checks.nees_check(9.0, bounds, per_state)
-    assert ok["passed"] is True and ok["verdict"] == "consistent"
+    assert ok["passed"] is True and ok["verdict"] == "not rejected"
     none = checks.nees_check(None, bounds, per_state)
     assert none["passed"] is None and none["detail"].startswith("not tested")
+
+
+def test_a_run_shorter_than_the_start_up_has_no_nees_verdict(tmp_path):
+    """The check leaves the first hour out: 30 min leave nothing to judge, and the
+    mean over them (the start-up's) is not judged in its place."""
+    out = tmp_path / "run"
+    rc, stdout, stderr = run_cli("run", "goes_next_equinox", "--duration-s", "1800",
+                                 "--out", str(out))
+    assert rc == 0, stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["nees_mean"] is not None and s["nees_mean_after_1h"] is None
+    c = s["checks"]["nees"]
+    assert c["passed"] is None and "shorter than its first hour" in c["detail"]
+    assert "NEES not tested (the run is shorter than its first hour" in stdout
 
 
 def test_gap_end_and_real_minus_linear_checks():
@@ -182,8 +207,8 @@ def test_linearization_of_six_hours_judges_nees_and_not_the_gap_ends(tmp_path):
         e = c["estimation"]
         assert e["within_3sigma_at_gap_ends"] is None
         m = e["nees_mean_real"]
-        assert e["nees_verdict_real"] == ("overconfident" if m > hi else
-                                          "conservative" if m < lo else "consistent")
+        assert e["nees_verdict_real"] == nees_verdict(m)
+        assert e["ekf_within_3sigma_at_gap_ends"] is None
         if m > hi:
             over.append(c)
     assert vacuous(rep) == []
