@@ -120,40 +120,10 @@ def _cmd_estimate(args) -> int:
         summary = estimate_to_directory(scenario, grid, truth, stage, sources)
         _note_tuned(args, stage / "summary.json")
         written = sorted(p.relative_to(stage) for p in stage.rglob("*") if p.is_file())
-    tel = summary["telemetry"]
-    gaps = tel.get("cadence_note") or (
-        f"{tel['missing_steps']} without a row, {tel['dropouts']} dropouts, longest "
-        f"{tel['longest_dropout_s']:g} s")
-    print(f"{scenario.name}: filtered {tel['rows']} telemetry rows on {tel['filter_steps']} "
-          f"steps of {scenario.sample_interval_s:g} s ({gaps}) in "
-          f"{time.perf_counter() - start:.1f} s")
-    sigmas = summary["yaw_sigma_at_gap_end_deg"]
-    eq55 = f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f}"
-    if not sigmas:
-        at_ends = f"no Sun-gap end in the telemetry: gap-end yaw not tested ({eq55})"
-    elif summary["yaw_error_rms_deg"] is None:
-        at_ends = (f"filter yaw sigma at Sun-gap ends "
-                   f"{', '.join(f'{e:.4f}' for e in sigmas)} deg ({eq55})")
-    else:
-        errs = summary["yaw_error_at_gap_end_deg"]
-        judged = ", ".join("not tested (no truth row near it)" if e is None else f"{e:+.4f}"
-                           for e in errs)
-        within = summary["yaw_within_3sigma_at_gap_ends"]
-        verdict = ("none tested" if within is None else
-                   "within 3 sigma" if within else "NOT within 3 sigma")
-        at_ends = (f"at Sun-gap ends {judged} deg (filter sigma "
-                   f"{', '.join(f'{e:.4f}' for e in sigmas)}; {eq55}): {verdict}")
-    if summary["yaw_error_rms_deg"] is None:
-        print(f"{at_ends}; no --truth, so no errors")
-    else:
-        cadence = tel["compared_cadence_s"]
-        every = "" if cadence is None else f", every {cadence:g} s"
-        print(f"errors on the {tel['compared_rows']} samples the truth has a row for{every}: "
-              f"yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; {at_ends}; "
-              f"{summary['checks']['nees']['detail'].split(': ')[0]}: "
-              f"{summary['checks']['nees']['verdict']}")
-    for w in summary["warnings"]:
-        print(f"warning: {w['message']}")
+    from .console import estimate_lines
+    for line in estimate_lines(scenario.name, summary, scenario.sample_interval_s,
+                               time.perf_counter() - start):
+        print(line)
     print(f"wrote {args.out}/: " + ", ".join(str(p) for p in written))
     return 0
 

@@ -1,5 +1,6 @@
-"""What `run` prints: the verdicts of summary.json's ``checks``, one line, then one
-line per warning.  Reads the summary only, so the console and the file agree."""
+"""What `run` and `estimate` print: the verdicts of summary.json's ``checks``, a
+line per filter, then one line per warning.  Reads the summary only, so the console
+and the file agree."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ def _gap_ends(summary: dict) -> str:
         return f"Sun-gap-end yaw {check['detail']}"
     verdict = "all within 3 sigma" if check["passed"] else "NOT all within 3 sigma"
     if len(errs) <= 6:
-        ends = ", ".join(f"{e:+.4f}" for e in errs)
+        # (None: `estimate --truth` had no truth row near that end.)
+        ends = ", ".join("not tested" if e is None else f"{e:+.4f}" for e in errs)
         sig = ", ".join(f"{e:.4f}" for e in sigs)
         return f"at Sun-gap ends {ends} deg (filter sigma {sig}): {verdict}"
     # A season of gap ends: the worst one, and where the rest are (daily.csv).
@@ -34,18 +36,49 @@ def _nees(check: dict) -> str:
     return check["detail"].split(": ")[0] + f": {check['verdict']}"
 
 
+def _ekf_line(summary: dict) -> list[str]:
+    e = summary.get("ekf")
+    if e is None or e["yaw_error_rms_deg"] is None:
+        return []
+    c = summary["checks"]
+    return [f"EKF: yaw error RMS {e['yaw_error_rms_deg']:.4f} deg; "
+            + _gap_ends({**e, "checks": {"gap_end_yaw_within_3sigma":
+                                         c["ekf_gap_end_yaw_within_3sigma"]}})
+            + "; " + _nees(c["ekf_nees"])]
+
+
+def estimate_lines(name: str, summary: dict, step_s: float, seconds: float) -> list[str]:
+    """The console report of `estimate`: what was filtered, then the verdicts as
+    `run` gives them (errors only with a truth, at the rows it has), then warnings."""
+    tel = summary["telemetry"]
+    gaps = tel.get("cadence_note") or (
+        f"{tel['missing_steps']} without a row, {tel['dropouts']} dropouts, longest "
+        f"{tel['longest_dropout_s']:g} s")
+    lines = [f"{name}: filtered {tel['rows']} telemetry rows on {tel['filter_steps']} steps "
+             f"of {step_s:g} s ({gaps}) in {seconds:.1f} s"]
+    eq55 = f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg"
+    sigmas = summary["yaw_sigma_at_gap_end_deg"]
+    if summary["yaw_error_rms_deg"] is None:
+        at_ends = (f"filter yaw sigma at Sun-gap ends {', '.join(f'{e:.4f}' for e in sigmas)}"
+                   f" deg" if sigmas else
+                   "no Sun-gap end in the telemetry: gap-end yaw not tested")
+        lines.append(f"{at_ends}; {eq55}; no --truth, so no errors")
+    else:
+        cadence = tel["compared_cadence_s"]
+        every = "" if cadence is None else f", every {cadence:g} s"
+        lines.append(f"errors on the {tel['compared_rows']} samples the truth has a row "
+                     f"for{every}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; "
+                     f"{_gap_ends(summary)}; {_nees(summary['checks']['nees'])}; {eq55}")
+        lines += _ekf_line(summary)
+    lines += [f"warning: {w['message']}" for w in summary["warnings"]]
+    return lines
+
+
 def run_lines(name: str, summary: dict, seconds: float) -> list[str]:
     """The console report of a run: its headline, then its warnings."""
     parts = [f"yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg", _gap_ends(summary),
              _real_minus_linear(summary), _nees(summary["checks"]["nees"]),
              f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg", f"{seconds:.1f} s"]
-    lines = [f"{name}: " + "; ".join(parts)]
-    e = summary.get("ekf")
-    if e is not None and e["yaw_error_rms_deg"] is not None:
-        c = summary["checks"]
-        lines.append(f"EKF: yaw error RMS {e['yaw_error_rms_deg']:.4f} deg; "
-                     + _gap_ends({**e, "checks": {"gap_end_yaw_within_3sigma":
-                                                  c["ekf_gap_end_yaw_within_3sigma"]}})
-                     + "; " + _nees(c["ekf_nees"]))
+    lines = [f"{name}: " + "; ".join(parts)] + _ekf_line(summary)
     lines += [f"warning: {w['message']}" for w in summary["warnings"]]
     return lines
