@@ -89,6 +89,16 @@ def nees_check(mean, bounds, per_state: dict | None, who: str = "the filter",
                   "consistency)", verdict="not rejected")
 
 
+def settled_nees_check(figures: dict, bounds, per_state: dict | None,
+                       who: str = "the filter") -> dict:
+    """``nees_check`` of a filter's NEES after the first hour (``figures``: summary.json
+    or its section of another filter), not tested without truth or that hour."""
+    why = ("no truth to compare with" if figures["nees_mean"] is None else
+           "the run is shorter than its first hour, the start-up the check leaves out")
+    return nees_check(figures.get("nees_mean_after_1h"), bounds, per_state, who=who,
+                      why_not=why, after=" after the first hour")
+
+
 def linear_range_check(max_deg: dict | None, at_h: dict | None) -> dict:
     """How far the truth went from the nominal attitude (``max_deg``, roll and yaw,
     reached at ``at_h``), against the linear range."""
@@ -137,12 +147,7 @@ def run_checks(summary: dict) -> dict:
     checks = {
         "gap_end_yaw_within_3sigma": gap_end_check(summary["yaw_error_at_gap_end_deg"],
                                                    summary["yaw_sigma_at_gap_end_deg"]),
-        "nees": nees_check(summary["nees_mean_after_1h"],
-                           summary["nees_bounds_95_per_sample"], per_state,
-                           why_not=("no truth to compare with" if summary["nees_mean"] is None
-                                    else "the run is shorter than its first hour, the "
-                                    "start-up the check leaves out"),
-                           after=" after the first hour"),
+        "nees": settled_nees_check(summary, summary["nees_bounds_95_per_sample"], per_state),
         "linear_range": linear_range_check(summary.get("truth_max_abs_deg"),
                                            summary.get("truth_max_abs_at_h")),
         "real_minus_linear": real_minus_linear_check(summary["nonlinear_vs_linear"],
@@ -157,11 +162,7 @@ def other_filter_checks(name: str, section: dict, bounds) -> dict:
     who = f"the {name.upper()}"
     return {f"{name}_gap_end_yaw_within_3sigma": gap_end_check(
                 section["yaw_error_at_gap_end_deg"], section["yaw_sigma_at_gap_end_deg"]),
-            f"{name}_nees": nees_check(
-                section.get("nees_mean_after_1h"), bounds, None, who=who,
-                why_not=("no truth to compare with" if section["nees_mean"] is None else
-                         "the run is shorter than its first hour, the start-up the check "
-                         "leaves out"), after=" after the first hour")}
+            f"{name}_nees": settled_nees_check(section, bounds, None, who=who)}
 
 
 def warnings_of(checks: dict) -> list[dict]:

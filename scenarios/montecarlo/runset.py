@@ -113,7 +113,7 @@ def one_line(summary: dict) -> str:
     frac = n["fraction_after_convergence"]
     parts = [f"{summary['runs_ok']} runs ({summary['runs_failed']} failed)"]
     if frac is None:
-        parts.append(f"NEES not tested ({untested_why(n)})")
+        parts.append(f"NEES not tested ({untested_why(n, summary['converged_after_h'])})")
     else:
         parts.append(f"averaged NEES {n['mean_after_convergence']:.2f} after "
                      f"{summary['converged_after_h']:g} h, inside [{lo:.2f}, {hi:.2f}] "

@@ -169,7 +169,6 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
     b1 = chi2_bounds(1, m)
     summary["nees"] = {
         "dof": N_STATES, "runs": m, "bounds_95": list(bounds),
-        "converged_after_h": s.montecarlo.converged_after_h,
         "points_after_convergence": int(conv.sum()),
         "last_point_h": float(t_s[-1] / 3600.0),
         "mean_after_convergence": _mean(nees_avg[conv]),
@@ -216,7 +215,7 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
     for name in others:
         summary[name] = _other_filter(name, mean, conv, bounds, wanted, ok, n_gaps, fig)
     summary["nees"]["per_state_test_95"] = per_state_test(summary["nees"])
-    summary["nees"]["diagnosis"] = diagnose(summary["nees"])
+    summary["nees"]["diagnosis"] = diagnose(summary["nees"], s.montecarlo.converged_after_h)
     fig["gaps_h"] = np.array([[g["start_h_median"], g["end_h_median"]] for g in gaps]
                              ).reshape(-1, 2)
     return summary, fig
@@ -241,21 +240,21 @@ def per_state_test(n: dict) -> dict[str, str] | None:
             for k, v in states.items()}
 
 
-def untested_why(n: dict) -> str:
+def untested_why(n: dict, converged_h: float) -> str:
     """Why a set has no NEES test: its grid has no point at or after the time from
-    which the filter counts as converged."""
+    which the filter counts as converged (``converged_h``)."""
     return (f"no grid point at or after montecarlo.converged_after_h = "
-            f"{n['converged_after_h']:g} h: the last is at {n['last_point_h']:.3g} h")
+            f"{converged_h:g} h: the last is at {n['last_point_h']:.3g} h")
 
 
-def diagnose(n: dict) -> str:
+def diagnose(n: dict, converged_h: float | None = None) -> str:
     """One sentence on where the averaged NEES sits and which states put it there
     (every state, grouped by ``per_state_test``); with the linear twin, whether the
     linearization or the filter's own model is the cause (the twin obeys that model
     exactly)."""
     frac = n["fraction_after_convergence"]
     if frac is None:
-        return f"not tested ({untested_why(n)})"
+        return f"not tested ({untested_why(n, converged_h)})"
     lo, hi = n["per_state_bounds_95"]
     states = n["per_state_mean_after_convergence"]
     test = per_state_test(n)
