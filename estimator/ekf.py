@@ -24,6 +24,7 @@ from dynprop.rollout.chunks import ChunkedRollout
 
 from . import ekf_model as m
 from .kalman import N_UT, FilterResult
+from .steps import per_step, roll_blocks
 
 _IU = np.triu_indices(m.NE)
 N_UT_E = len(_IU[0])   # 66
@@ -163,9 +164,11 @@ def initial_state(x0_paper: np.ndarray, P0_paper: np.ndarray, pitch_sigma_rad: f
 def ekf_filter(inputs: EkfInputs, params: np.ndarray, omega_n_radps: float,
                X0: np.ndarray, P0: np.ndarray, backend: str | None = None,
                chunk: int = 4096, rows=None, keep_nominal: bool = False,
-               iterations: int = ITERATIONS) -> EkfResult:
+               iterations: int = ITERATIONS, dt_s: np.ndarray | None = None) -> EkfResult:
     """Run the EKF over every sample (``rows``: keep only those samples' history).
-    ``params`` from ``ekf_model.pack_params``."""
+    ``params`` from ``ekf_model.pack_params``; with ``dt_s`` (the interval after each
+    sample, ``steps.step_intervals``) each step propagates over its own Δt instead of
+    the one in ``params`` (``_ekf_per_step``)."""
     z, r, u = (np.asarray(a, dtype=float) for a in (inputs.z, inputs.r, inputs.u))
     n = len(z)
     if z.shape != (n, m.NZ) or r.shape != (n, m.NZ) or u.shape != (n, m.NU):
@@ -175,6 +178,9 @@ def ekf_filter(inputs: EkfInputs, params: np.ndarray, omega_n_radps: float,
         raise ValueError("measurement variances must be positive where a value is present")
     if not np.all(np.isfinite(u)):
         raise ValueError("the inputs u must be finite")
+    if dt_s is not None:
+        return _ekf_per_step(inputs, params, omega_n_radps, X0, P0, backend, chunk, rows,
+                             keep_nominal, iterations, np.asarray(dt_s, dtype=float))
     engine = _engine(chunk, backend, iterations)
     P0 = np.asarray(P0, dtype=float)
     s0 = np.concatenate([np.asarray(X0, dtype=float), 0.5 * (P0 + P0.T)[_IU]])
@@ -190,3 +196,55 @@ def ekf_filter(inputs: EkfInputs, params: np.ndarray, omega_n_radps: float,
     return EkfResult(aux[:, :9], aux[:, 9:o], nu, S, last[:m.NX], unpack_e(last[m.NX:]),
                      engine.backend, aux[:, o + 2 * m.NZ:] if keep_nominal else None)
 
+
+
+def _ekf_per_step(inputs: EkfInputs, params, omega_n_radps, X0, P0, backend, chunk, rows,
+                  keep_nominal, iterations, dt_s) -> EkfResult:
+    """``ekf_filter`` with each sample's own interval ``dt_s``.  The EKF integrates its
+    nonlinear model with one RK4 step per interval, which is accurate only over a small
+    part of the nutation period (the ~0.5 s the filter is designed for), so an interval
+    longer than the nominal one in ``params`` is cut into equal sub-steps no longer than
+    it, without measurements, the sample's inputs held over them: a three-hour gap is
+    ~21,000 sub-steps, and the history keeps the samples themselves."""
+    z = np.asarray(inputs.z, dtype=float)
+    n = len(z)
+    if dt_s.shape != (n,) or not np.all(np.isfinite(dt_s) & (dt_s > 0)):
+        raise ValueError(f"dt_s must hold {n} positive intervals")
+    nominal = float(params[m.DT_INDEX])
+    subs = np.maximum(np.ceil(dt_s / nominal * (1 - 1e-12)), 1).astype(np.int64)
+    first = np.r_[0, np.cumsum(subs)[:-1]]     # each sample's own (first) sub-step
+    src = np.repeat(np.arange(n), subs)
+    fresh = np.zeros(len(src), dtype=bool)
+    fresh[first] = True
+    zz = np.where(fresh[:, None], z[src], np.nan)
+    expanded = EkfInputs(zz, np.asarray(inputs.r, dtype=float)[src],
+                         np.asarray(inputs.u, dtype=float)[src])
+    keep = first if rows is None else first[np.asarray(rows, dtype=np.int64)]
+    h = (dt_s / subs)[src]
+    base = np.concatenate([np.asarray(params, dtype=float), [omega_n_radps]])
+
+    def params_of(a, b):
+        p = np.repeat(base[None, :], b - a, axis=0)
+        p[:, m.DT_INDEX] = h[a:b]
+        return p
+
+    z2, r2, u2 = expanded.z, expanded.r, expanded.u
+    present = np.isfinite(z2)
+    P0 = np.asarray(P0, dtype=float)
+    s0 = np.concatenate([np.asarray(X0, dtype=float), 0.5 * (P0 + P0.T)[_IU]])
+    ins = [np.where(present, z2, 0.0), present.astype(float), np.where(present, r2, 1.0), u2]
+    engine = _engine_per_step(chunk, backend, iterations)
+    last, _, aux = roll_blocks(engine, s0, ins, len(src), params_of, np.arange(0), keep,
+                               np.arange(engine.n_aux))
+    present = present[keep]
+    o = 9 + N_UT
+    nu, S = aux[:, o:o + m.NZ].copy(), aux[:, o + m.NZ:o + 2 * m.NZ].copy()
+    nu[~present], S[~present] = np.nan, np.nan
+    return EkfResult(aux[:, :9], aux[:, 9:o], nu, S, last[:m.NX], unpack_e(last[m.NX:]),
+                     engine.backend, aux[:, o + 2 * m.NZ:] if keep_nominal else None)
+
+
+@lru_cache(maxsize=4)
+def _engine_per_step(chunk: int, backend: str | None, iterations: int = ITERATIONS
+                     ) -> ChunkedRollout:
+    return ChunkedRollout(per_step(ekf_step(iterations)), chunk, 256, backend)

@@ -40,6 +40,7 @@ NOISE_NAMES = ("q_x", "q_y", "q_z", "q_w", "q_px", "q_pz", "q_cx", "q_cz")
 # J and J⁻¹ (column-major; J⁻¹ computed once in numpy, not symbolically at every
 # evaluation of the dynamics), ω0, Δt, the noise intensities.
 N_PARAMS = 9 + 9 + 2 + len(NOISE_NAMES)
+DT_INDEX = 19   # where Δt sits in the parameter vector (``pack_params``)
 
 
 def unpack_params(p):

@@ -25,12 +25,14 @@ from .kalman_steps import (
     _IU,
     MEAS_STATES,
     N_UT,
+    PHI_PATTERN,
     _engine,
     pack,
     pack_params,
     unpack,
 )
 from .model import N_STATES
+from .steps import StepTable, roll_blocks
 
 
 @dataclass(frozen=True)
@@ -152,6 +154,9 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
     present = np.isfinite(z)
     scale, Qd_unit = _extra(extra, n)
     inputs = [np.where(present, z, 0.0), present.astype(float), r, _inputs(u, n), scale]
+    if isinstance(disc, StepTable):
+        return _filter_per_step(disc, engine.backend, chunk, s0, inputs, present, rows,
+                                covariance_rows)
     p = pack_params(disc, Qd_unit)
     if covariance_rows is not None:
         if rows is not None:
@@ -193,7 +198,8 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
                               result.P_packed.copy() if covariance else None)
     u = _inputs(u, n)
     scale, Qd_unit = _extra(extra, n)
-    engine = _engine("smoother" if covariance else "smoother_x", chunk, backend)
+    kind = "smoother" if covariance else "smoother_x"
+    engine = _engine(kind, chunk, backend)
     # Backwards: step k uses the filter's k-th posterior and input, for k = n−2 … 0
     # (from n−1 when the smoothed state after the history is given).
     rev = slice(n - 2 if x_after is None else n - 1, None, -1)
@@ -201,8 +207,18 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
         s0 = np.concatenate([result.x[-1], result.P_packed[-1]])
     else:
         s0 = result.x[-1] if x_after is None else np.asarray(x_after, dtype=float)
-    _, aux = engine.run_final(s0, [result.x[rev], result.P_packed[rev], u[rev], scale[rev]],
-                              pack_params(disc, Qd_unit))
+    backwards = [result.x[rev], result.P_packed[rev], u[rev], scale[rev]]
+    if isinstance(disc, StepTable):
+        if len(disc) != n:
+            raise ValueError(f"the step table has {len(disc)} steps, the history {n}")
+        # Step k's interval is that after sample k, read in the same reversed order.
+        steps = np.arange(n)[rev]
+        engine = _engine(kind + "_per_step", chunk, backend)
+        _, aux, _ = roll_blocks(engine, s0, backwards, len(steps),
+                                lambda a, b: _param_rows(disc, steps[a:b]),
+                                np.arange(engine.n_aux), np.arange(0), np.arange(0))
+    else:
+        _, aux = engine.run_final(s0, backwards, pack_params(disc, Qd_unit))
     if x_after is not None:
         return SmootherResult(aux[::-1].copy(), None)
     xs = np.vstack([aux[::-1, :N_STATES], result.x[-1:]])
@@ -210,6 +226,60 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
         return SmootherResult(xs, None)
     Ps = np.vstack([aux[::-1, N_STATES:], result.P_packed[-1:]])
     return SmootherResult(xs, Ps)
+
+
+def _param_rows(table: StepTable, steps: np.ndarray) -> np.ndarray:
+    """``pack_params`` of each of ``steps``' intervals, (len(steps), 252): each distinct
+    interval evaluated once (``StepTable.block``), with its own unit wheel noise (the
+    ``ExtraNoise.Qd_unit`` of that Δt)."""
+    steps = np.asarray(steps)
+    used, local = np.unique(table.index[steps], return_inverse=True)
+    d = table.block_of(used)
+    n = len(used)
+    Phi, Gam = np.swapaxes(d.Phi, 1, 2), np.swapaxes(d.Gamma, 1, 2)  # column-major rows
+    off = np.abs(np.where(PHI_PATTERN, 0.0, d.Phi)).max(initial=0.0)
+    if off > 1e-12 * np.abs(d.Phi).max():
+        raise ValueError(f"Phi has entries outside the structure of Eq. 15 ({off:g})")
+    rows = np.concatenate([Phi.reshape(n, -1), Gam.reshape(n, -1), pack(d.Qd),
+                           pack(d.Qd_unit)], axis=1)
+    return rows[local]
+
+
+def _filter_per_step(table: StepTable, backend: str, chunk: int, s0, inputs, present,
+                     rows, covariance_rows) -> FilterResult:
+    """``kalman_filter`` with each step's own interval (``steps``); the history
+    kept as ``rows`` or ``covariance_rows`` say."""
+    n = len(present)
+    if len(table) != n:
+        raise ValueError(f"the step table has {len(table)} steps, the telemetry {n}")
+    engine = _engine("filter_per_step", chunk, backend)
+    every_col = np.arange(engine.n_aux)
+    if covariance_rows is not None:
+        if rows is not None:
+            raise ValueError("rows and covariance_rows exclude each other")
+        cols = np.r_[0:N_STATES, N_STATES + N_UT:engine.n_aux]
+        kept_rows, kept_cols = np.asarray(covariance_rows, np.int64), every_col[N_STATES:
+                                                                               N_STATES + N_UT]
+    elif rows is None:
+        cols, kept_rows, kept_cols = every_col, np.arange(0), np.arange(0)
+    else:
+        cols, kept_rows, kept_cols = np.arange(0), np.asarray(rows, np.int64), every_col
+    last, every, kept = roll_blocks(engine, s0, inputs, n,
+                                    lambda a, b: _param_rows(table, np.arange(a, b)),
+                                    cols, kept_rows, kept_cols)
+    if covariance_rows is not None:
+        x, P = every[:, :N_STATES], kept
+        nu, S = every[:, N_STATES:N_STATES + 3], every[:, N_STATES + 3:]
+    else:
+        aux = every if rows is None else kept
+        if rows is not None:
+            present = present[kept_rows]
+        x, P = aux[:, :N_STATES], aux[:, N_STATES:N_STATES + N_UT]
+        nu, S = aux[:, N_STATES + N_UT:N_STATES + N_UT + 3], aux[:, -3:]
+    nu, S = nu.copy(), S.copy()
+    nu[~present] = np.nan
+    S[~present] = np.nan
+    return FilterResult(x, P, nu, S, last[:N_STATES], unpack(last[N_STATES:]), engine.backend)
 
 
 def dense_filter(meas: Measurements, disc, x0, P0, u=None, extra: ExtraNoise | None = None
@@ -220,7 +290,9 @@ def dense_filter(meas: Measurements, disc, x0, P0, u=None, extra: ExtraNoise | N
     n = len(z)
     u = _inputs(u, n)
     scale, Qd_unit = _extra(extra, n)
-    Phi, Gam, Qd = (np.asarray(m, dtype=float) for m in (disc.Phi, disc.Gamma, disc.Qd))
+    table = disc if isinstance(disc, StepTable) else None
+    if table is None:
+        Phi, Gam, Qd = (np.asarray(m, dtype=float) for m in (disc.Phi, disc.Gamma, disc.Qd))
     x, P = np.asarray(x0, dtype=float).copy(), np.asarray(P0, dtype=float).copy()
     xs, Ps = np.empty((n, N_STATES)), np.empty((n, N_STATES, N_STATES))
     eye = np.eye(N_STATES)
@@ -235,6 +307,9 @@ def dense_filter(meas: Measurements, disc, x0, P0, u=None, extra: ExtraNoise | N
             IKG = eye - K @ G
             P = IKG @ P @ IKG.T + r[k, i] * K @ K.T
         xs[k], Ps[k] = x, P
+        if table is not None:
+            d = table.block_of(table.index[k:k + 1])
+            Phi, Gam, Qd, Qd_unit = d.Phi[0], d.Gamma[0], d.Qd[0], d.Qd_unit[0]
         x = Phi @ x + Gam @ u[k]
         P = Phi @ P @ Phi.T + Qd + scale[k] * Qd_unit
     return xs, Ps

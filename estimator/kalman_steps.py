@@ -215,6 +215,10 @@ def smoother_x_step() -> ca.Function:
 
 @lru_cache(maxsize=6)
 def _engine(kind: str, chunk: int, backend: str | None) -> ChunkedRollout:
+    base = kind.removesuffix("_per_step")
     step = {"filter": filter_step, "smoother": smoother_step,
-            "smoother_x": smoother_x_step}[kind]()
+            "smoother_x": smoother_x_step}[base]()
+    if base != kind:   # each step's own Φ, Γ, Q_d (``steps``: telemetry at any cadence)
+        from .steps import per_step
+        step = per_step(step)
     return ChunkedRollout(step, chunk, 256, backend)

@@ -151,3 +151,93 @@ def prepare(params: ModelParams, dt_s: float, roll_rad, yaw_rad, wheel_speeds_ra
     nw = wheel_torque(h, dt_s, nw_window_s)
     u = input_vector(params, Nx_model_Nm, Nz_model_Nm, nw) * np.ones((len(roll), 1))
     return FilterInputs(meas, u, dropout_wheel_noise(h, dt_s, float(meas.var_h)))
+
+
+# --- Telemetry at any cadence (``steps``): each sample at its own time --------------
+
+def cadence(t_s) -> float:
+    """A file's own cadence: its median step (s)."""
+    return float(np.median(np.diff(np.asarray(t_s, dtype=float))))
+
+
+def _uniform(t: np.ndarray, dt: float) -> np.ndarray:
+    return t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
+
+
+def wheel_torque_at(t_s, h_Nms, window_s: float = 20.0) -> np.ndarray:
+    """N_w* held over each step [t_k, t_{k+1}] of samples at any times: the mean of
+    ḣ over the step, the constant input that carries h across it (Eq. 31 holds ū
+    over the step).  ḣ is ``wheel_torque``'s Savitzky–Golay derivative of h
+    resampled linearly onto the file's own cadence (``cadence``), so across a gap it
+    is the bridge's Δh/Δt, as on the grid; its running integral, read at the sample
+    times, gives each step's mean.  The last sample gets the step before it."""
+    t = np.asarray(t_s, dtype=float)
+    h = np.asarray(h_Nms, dtype=float)
+    ok = np.isfinite(h)
+    if not (ok[0] and ok[-1]):
+        raise ValueError("the wheel speeds of the first and last samples must be present")
+    dt = cadence(t)
+    grid = _uniform(t, dt)
+    rate = wheel_torque(np.interp(grid, t[ok], h[ok]), dt, window_s)
+    integral = np.r_[0.0, np.cumsum(0.5 * (rate[1:] + rate[:-1]) * dt)]
+    # The integral at the samples (the last ones may lie past the grid's end by < dt).
+    H = np.interp(t, grid, integral, right=np.nan)
+    past = np.isnan(H)
+    H[past] = integral[-1] + rate[-1] * (t[past] - grid[-1])
+    nw = np.diff(H) / np.diff(t)
+    return np.r_[nw, nw[-1]]
+
+
+def dropout_wheel_noise_at(t_s, h_Nms, var_h: float, gap_factor: float = 1.5
+                           ) -> np.ndarray | None:
+    """``dropout_wheel_noise`` for samples at any times: per-step q_w ((N m)² s) on each
+    step longer than ``gap_factor`` × the file's cadence (a dropout, or a missing
+    tachometer reading inside one), None if there is none.  A bridge of duration T
+    takes the q_w that straight-line bridges of T leave at their middle, measured on
+    the file resampled to its cadence at the nearest sample (not interpolated, which
+    would average the tachometer noise away): a jitter of tens of ms moves a bridge
+    of minutes by nothing that matters."""
+    t = np.asarray(t_s, dtype=float)
+    h = np.asarray(h_Nms, dtype=float)
+    ok = np.isfinite(h)
+    dt = cadence(t)
+    tk, hk = t[ok], h[ok]
+    span = np.diff(tk)
+    gaps = span > gap_factor * dt
+    if not gaps.any():
+        return None
+    grid = _uniform(t, dt)
+    j = np.clip(np.searchsorted(tk, grid), 1, len(tk) - 1)
+    j = np.where(grid - tk[j - 1] < tk[j] - grid, j - 1, j)
+    near = np.where(np.abs(tk[j] - grid) <= 0.5 * dt, hk[j], np.nan)
+    lengths = np.rint(span[gaps] / dt).astype(np.int64)
+    q_of, fallback = {}, None
+    for steps in sorted(set(lengths.tolist())):
+        q = _bridge_q(near, steps, dt, var_h) if steps < len(near) else None
+        if q is None:
+            q = fallback if fallback is not None else 0.0
+        else:
+            fallback = q
+        q_of[steps] = q
+    # Each bridged tachometer span's q_w on every filter step inside it.
+    per_step = np.zeros(len(t))
+    idx = np.flatnonzero(ok)
+    for k, steps in zip(np.flatnonzero(gaps), lengths, strict=True):
+        per_step[idx[k]:idx[k + 1]] = q_of[int(steps)]
+    return per_step
+
+
+def prepare_at_times(params: ModelParams, t_s, roll_rad, yaw_rad, wheel_speeds_radps,
+                     yaw_factors, sensors: SensorSpecs = PAPER_SENSORS, yaw_sigma_rad=None,
+                     Nx_model_Nm=0.0, Nz_model_Nm=0.0, nw_window_s: float = 20.0
+                     ) -> FilterInputs:
+    """``prepare`` for samples at their own times ``t_s`` (any cadence, jitter, gaps):
+    the same measurements, with N_w* each step's mean (``wheel_torque_at``) and the
+    dropout noise per step (``dropout_wheel_noise_at``)."""
+    t = np.asarray(t_s, dtype=float)
+    base = prepare(params, cadence(t), roll_rad, yaw_rad, wheel_speeds_radps, yaw_factors,
+                   sensors, yaw_sigma_rad, Nx_model_Nm, Nz_model_Nm, nw_window_s)
+    meas = base.measurements
+    nw = wheel_torque_at(t, meas.h_Nms, nw_window_s)
+    u = input_vector(params, Nx_model_Nm, Nz_model_Nm, nw) * np.ones((len(t), 1))
+    return FilterInputs(meas, u, dropout_wheel_noise_at(t, meas.h_Nms, float(meas.var_h)))

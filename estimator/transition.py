@@ -208,7 +208,16 @@ def _fast_slow(w0, wn, tau, f_slow, F_slow) -> np.ndarray:
     return np.stack([E.imag / wn, (F_slow - E.real) / wn**2], axis=1)
 
 
-def _scalars(p: ModelParams, tau: np.ndarray, need_J: bool):
+def _products(cA, M, cB, batched: bool) -> np.ndarray:
+    """Σ_mn cA[t,k,m] M[m,n] cB[t,l,n]: as one einsum for a single τ (whose summation
+    order every filter step's Φ, Γ, Q_d has always had: changing it would change their
+    last bits), as batched matrix products for many (``steps``: ~100× faster)."""
+    if not batched:
+        return np.einsum("tkm,mn,tln->tkl", cA, M, cB)
+    return (cA @ M) @ np.swapaxes(cB, 1, 2)
+
+
+def _scalars(p: ModelParams, tau: np.ndarray, need_J: bool, batched: bool = False):
     """f_k(τ), ∫_0^τ f_k and (if need_J) ∫_0^τ f_k f_l for the 12 functions of ``_coeffs``
     (flat τ); the short six are zero where |ω_n τ| > 2 and the long six where it is ≤ 2."""
     w0, wn = p.omega0_radps, p.omega_n_radps
@@ -237,9 +246,9 @@ def _scalars(p: ModelParams, tau: np.ndarray, need_J: bool):
     if not need_J:
         return f, F, None
     J = np.zeros((len(tau), 12, 12))
-    J[:, :6, :6] = tau[:, None, None] * np.einsum("tkm,mn,tln->tkl", cS, _INT2, cS)
+    J[:, :6, :6] = tau[:, None, None] * _products(cS, _INT2, cS, batched)
     JL = J[:, 6:, 6:]
-    ser = tau[:, None, None] * np.einsum("tkm,mn,tln->tkl", cslow, _INT2, cslow)
+    ser = tau[:, None, None] * _products(cslow, _INT2, cslow, batched)
     for k in range(6):
         for m in range(k, 6):
             if k < 2 and m < 2:
@@ -273,6 +282,28 @@ def _propagate(p: ModelParams, tau, Q=None):
           + (J.reshape(len(t), -1) @ GQG).reshape(len(t), N_STATES, N_STATES))
     Qd = 0.5 * (Qd + np.swapaxes(Qd, 1, 2))
     return Phi.reshape(shape), Gam.reshape(shape), Qd.reshape(shape)
+
+
+def propagate_many(p: ModelParams, tau: np.ndarray, Qs: list[np.ndarray]):
+    """Φ, Γ and Q_d for each of ``Qs`` at every τ of a flat array (``steps``: many
+    intervals at once), the scalar functions evaluated once, their products batched
+    (``_products``): each Q_d is ``_propagate``'s to rounding."""
+    t = _tau(tau).ravel()
+    G = _coeffs(p)
+    f, F, J = _scalars(p, t, True, batched=True)
+    eye = np.eye(N_STATES)
+    Phi = eye + np.einsum("tk,kij->tij", f, G)
+    Gam = t[:, None, None] * eye + np.einsum("tk,kij->tij", F, G)
+    out = []
+    Jf = J.reshape(len(t), -1)
+    for Q in Qs:
+        GQ = G @ Q
+        first = np.einsum("tk,kij->tij", F, GQ)
+        GQG = np.einsum("kia,lja->klij", GQ, G).reshape(len(G) ** 2, -1)
+        Qd = (t[:, None, None] * Q + first + np.swapaxes(first, 1, 2)
+              + (Jf @ GQG).reshape(len(t), N_STATES, N_STATES))
+        out.append(0.5 * (Qd + np.swapaxes(Qd, 1, 2)))
+    return Phi, Gam, out
 
 
 def theta_closed(p: ModelParams, tau) -> np.ndarray:

@@ -1,0 +1,171 @@
+"""The filters with each sample's own Δt (``estimator.steps``): telemetry at any
+cadence, with jitter and gaps, against independent references.
+
+Φ, Γ and Q_d of each step here come from scipy's expm and Van Loan's method
+(``test_kalman.expm_discretization``), not from the closed forms, so the test checks
+the per-step bookkeeping and the closed forms together."""
+
+import numpy as np
+import pytest
+
+from estimator import ekf_model as em
+from estimator.ekf import ekf_filter
+from estimator.kalman import ExtraNoise, Measurements, kalman_filter, rts_smoother
+from estimator.model import N_STATES, ProcessNoise
+from estimator.steps import StepTable, discretize_many, step_intervals
+from estimator.transition import discretize
+
+from .cov_helpers import cov_dev
+from .test_kalman import NOISE, P0, PARAMS, R_H, R_ROLL, R_YAW, expm_discretization
+
+
+def _jittered(n, rng, gap_at=None, gap_s=0.0):
+    t = np.cumsum(np.r_[0.0, 0.512 + rng.uniform(-0.05, 0.05, n - 1)])
+    if gap_at is not None:
+        t[gap_at:] += gap_s
+    return t
+
+
+def _measurements(n, rng, yaw_every=3):
+    yaw = rng.normal(0, 1e-3, n)
+    yaw[np.arange(n) % yaw_every == 0] = np.nan
+    return Measurements(rng.normal(0, 2e-4, n), yaw, rng.normal(0, 1e-3, n),
+                        R_ROLL, R_YAW, R_H)
+
+
+def _expm_filter(meas, t, x0, P0_):
+    """The paper's filter, one numpy step at a time, each step's Φ, Γ, Q_d from expm
+    and Van Loan at its own interval."""
+    z, r = meas.z(), meas.r()
+    x, P = x0.copy(), P0_.copy()
+    xs, Ps = [], []
+    eye = np.eye(N_STATES)
+    for k, dt in enumerate(step_intervals(t)):
+        for i, idx in enumerate((0, 2, 4)):
+            if np.isnan(z[k, i]):
+                continue
+            G = eye[idx:idx + 1]
+            S = (G @ P @ G.T).item() + r[k, i]
+            K = P @ G.T / S
+            x = x + (K * (z[k, i] - x[idx])).ravel()
+            IKG = eye - K @ G
+            P = IKG @ P @ IKG.T + r[k, i] * K @ K.T
+        xs.append(x)
+        Ps.append(P)
+        d = expm_discretization(dt=dt)
+        x, P = d.Phi @ x, d.Phi @ P @ d.Phi.T + d.Qd
+    return np.array(xs), np.array(Ps)
+
+
+def test_jittered_steps_with_a_gap_match_an_expm_reference(rng):
+    """±50 ms jitter and a one-hour gap: the compiled per-step filter equals the
+    expm/Van Loan reference.  Tolerance: the reference's expm of a one-hour step
+    loses ~1e-10 relative (‖F‖Δt ~ 100 rad of nutation phase), which sets the
+    bound on the estimates (1e-8 of σ + |x|) and covariances (1e-8 of √(P_ii P_jj))."""
+    n = 400
+    t = _jittered(n, rng, gap_at=200, gap_s=3600.0)
+    meas = _measurements(n, rng)
+    x0 = np.zeros(N_STATES)
+    result = kalman_filter(meas, StepTable.from_times(PARAMS, NOISE, t), x0, P0)
+    xs, Ps = _expm_filter(meas, t, x0, P0)
+    sig = np.sqrt(np.einsum("kii->ki", Ps))
+    assert np.max(np.abs(result.x - xs) / (sig + np.abs(xs))) < 1e-8
+    assert np.max(cov_dev(result.P, Ps)) < 1e-8
+    # The gap costs what the process noise says: σ_yaw grows across it.
+    assert result.sigma[200, 2] > 3 * result.sigma[199, 2]
+
+
+def test_one_cadence_as_a_table_equals_the_fixed_step_filter(rng):
+    """Every step 0.512 s: the table's filter and smoother are the fixed-step ones, to
+    rounding (the batched closed forms sum in another order: 1e-12 of σ)."""
+    n = 2000
+    meas = _measurements(n, rng)
+    x0 = np.zeros(N_STATES)
+    disc = discretize(PARAMS, NOISE, 0.512)
+    table = StepTable.from_times(PARAMS, NOISE, np.arange(n) * 0.512)
+    a, b = kalman_filter(meas, disc, x0, P0), kalman_filter(meas, table, x0, P0)
+    assert np.max(np.abs(a.x - b.x) / a.sigma) < 1e-12
+    assert np.max(np.abs(b.sigma / a.sigma - 1)) < 1e-12
+    sa, sb = rts_smoother(a, disc), rts_smoother(b, table)
+    assert np.max(np.abs(sa.x - sb.x) / sa.sigma) < 1e-10
+    assert np.max(np.abs(sb.sigma / sa.sigma - 1)) < 1e-10
+
+
+def test_a_long_step_equals_the_same_span_in_grid_steps(rng):
+    """Φ(a + b) = Φ(a)Φ(b) and Q_d adds up: one 3 h step without measurements equals
+    21,094 steps of 0.512 s (almost exactly 3 h: 10800.128 s) without them."""
+    m = 21094
+    pre = 300
+    meas_short = _measurements(pre + 2, rng)
+    t_long = np.r_[np.arange(pre + 1) * 0.512, pre * 0.512 + m * 0.512]
+    x0 = np.zeros(N_STATES)
+    long = kalman_filter(meas_short, StepTable.from_times(PARAMS, NOISE, t_long), x0, P0)
+    blank = np.full(m - 1, np.nan)
+    grid = Measurements(*(np.r_[v[:pre + 1], blank, v[pre + 1:]] for v in
+                          (meas_short.roll_rad, meas_short.yaw_rad, meas_short.h_Nms)),
+                        R_ROLL, R_YAW, R_H)
+    fine = kalman_filter(grid, discretize(PARAMS, NOISE, 0.512), x0, P0)
+    # 21,094 products of Φ accumulate ~1e-12 relative; the one long step is exact.
+    assert np.max(np.abs(long.x[-1] - fine.x[-1]) / fine.sigma[-1]) < 1e-8
+    assert np.max(np.abs(long.sigma[-1] / fine.sigma[-1] - 1)) < 1e-8
+
+
+def test_batched_closed_forms_equal_the_single_ones():
+    dt = np.array([0.3, 0.512, 0.561, 1.0, 2.0, 100.0, 10800.0])
+    many = discretize_many(PARAMS, NOISE, dt)
+    for i, d in enumerate(dt):
+        one = discretize(PARAMS, NOISE, d)
+        for a, b in ((many.Phi[i], one.Phi), (many.Gamma[i], one.Gamma), (many.Qd[i], one.Qd)):
+            assert np.max(np.abs(a - b)) <= 1e-13 * np.abs(b).max()
+        unit = discretize(PARAMS, ProcessNoise(q_x=0.0, q_z=0.0, q_w=1.0), d).Qd
+        assert np.max(np.abs(many.Qd_unit[i] - unit)) <= 1e-13 * np.abs(unit).max()
+
+
+def test_dropout_noise_uses_each_steps_own_unit(rng):
+    """``ExtraNoise`` on a table: step k adds scale_k × Q_d(q_w = 1) at its own Δt, so a
+    long bridged step gets the matching (larger) unit, not the 0.512 s one."""
+    n = 50
+    t = np.r_[np.arange(25) * 0.512, 25 * 0.512 + 600.0 + np.arange(25) * 0.512]
+    meas = _measurements(n, rng)
+    meas.roll_rad[25] = meas.yaw_rad[25] = np.nan   # h alone at 25: S_h = P⁻_hh + R_h
+    x0 = np.zeros(N_STATES)
+    table = StepTable.from_times(PARAMS, NOISE, t)
+    scale = np.zeros(n)
+    scale[24] = 1e-8
+    with_extra = kalman_filter(meas, table, x0, P0, extra=ExtraNoise(scale, np.zeros((9, 9))))
+    noise2 = ProcessNoise(q_x=NOISE.q_x, q_z=NOISE.q_z, q_w=NOISE.q_w + 1e-8, q_px=NOISE.q_px,
+                          q_pz=NOISE.q_pz, q_cx=NOISE.q_cx, q_cz=NOISE.q_cz)
+    P_prior = with_extra.P[24]
+    d_ref = discretize(PARAMS, noise2, 600.512)
+    # Before the update at sample 25 the prior is Φ P Φᵀ + Q_d(q_w + 1e-8) at 600.512 s.
+    ref = d_ref.Phi @ P_prior @ d_ref.Phi.T + d_ref.Qd
+    np.testing.assert_allclose(np.sqrt(ref[4, 4]), np.sqrt(_prior_h(with_extra, meas, 25)),
+                               rtol=1e-9)
+
+
+def _prior_h(result, meas, k):
+    """The prior variance of h at sample k, from the h update: S − R."""
+    return result.innovation_var[k, 2] - R_H
+
+
+@pytest.mark.parametrize("gap_steps", [1, 40])
+def test_ekf_long_steps_are_cut_into_nominal_sub_steps(gap_steps, rng):
+    """The EKF cuts a step of n × the nominal Δt into n sub-steps without measurements:
+    exactly the fixed-step EKF with those samples missing (the same arithmetic; 1e-12
+    of σ allows another rounding of the per-step Δt)."""
+    from estimator.ekf import EkfInputs
+
+    from .test_ekf import PM, WN, _prior, _twin_data
+    n = 300
+    _, data = _twin_data(n, rng)
+    X0, Pe = _prior()
+    dt0 = float(PM[em.DT_INDEX])
+    keep = np.r_[0:100, 100 + gap_steps - 1:n]
+    dt = step_intervals(np.arange(n)[keep] * dt0)
+    sparse = ekf_filter(EkfInputs(data.z[keep], data.r[keep], data.u[keep]), PM, WN, X0, Pe,
+                        dt_s=dt)
+    zz = data.z.copy()
+    zz[100:100 + gap_steps - 1] = np.nan
+    full = ekf_filter(EkfInputs(zz, data.r, data.u), PM, WN, X0, Pe)
+    assert np.max(np.abs(sparse.x - full.x[keep]) / full.sigma[keep]) < 1e-12
+    assert np.max(np.abs(sparse.sigma / full.sigma[keep] - 1)) < 1e-12
