@@ -29,6 +29,12 @@ set by powers of the frequency ratio ε = ω0/|ω_n| ≈ 2e-3: the deepest neede
 (G″ and G′, seventh block row) is ≈ 1.2e-9, of order ε³.  The default sits more than
 four decades below that and more than two above the rounding level; the
 margins are in ``rank_margins`` and are tested.
+
+The same test on the state augmented with sensor biases (not in the paper) is at the
+end of the module (``format_bias_table``): a constant sensor bias is, with the
+paper's constant torque states, indistinguishable from an attitude offset that the
+torque holds, so the roll bias is never observable alone and a head's yaw bias only
+against another head's yaw.
 """
 
 from __future__ import annotations
@@ -194,8 +200,12 @@ def observability_results(p: ModelParams, tol: float | None = None) -> list[dict
     return out
 
 
-def format_rank_table(p: ModelParams, tol: float | None = None) -> str:
-    """The text of ``dynprop observability``: rank after each power k, full-rank power."""
+def format_rank_table(p: ModelParams, tol: float | None = None, biases=()) -> str:
+    """The text of ``dynprop observability``: rank after each power k, full-rank power;
+    with ``biases`` (of ``BIAS_NAMES``), the same on the augmented state after it
+    (``format_bias_table``)."""
+    if biases:
+        return format_rank_table(p, tol) + "\n\n" + format_bias_table(p, biases, tol)
     res = observability_results(p, tol)
     kmax = max(len(r["ranks"]) for r in res)
     head = f"{'configuration':<44}" + "".join(f"{f'k={k}':>5}" for k in range(kmax))
@@ -224,4 +234,186 @@ def format_rank_table(p: ModelParams, tol: float | None = None) -> str:
             lines.append(f"  = a constant yaw torque N_cz with the yaw offset it balances, "
                          f"y/N_cz = {v[Y] / v[NCZ]:.2f} rad/(N m) "
                          f"(-1/(ω0 H) = {-1 / (p.omega0_radps * p.H_Nms):.2f})")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ sensor-bias states
+#
+# Not in the paper: the state augmented with sensor biases b (``augmented``'s filter),
+# x_a = [x (Eq. 10), b].  A bias has no dynamics (a constant, or a random walk whose
+# noise does not enter observability), so F_a = blockdiag(F, 0); it adds to its
+# sensor's measurement row: roll = e_r + e_earth_roll, yaw from a head = e_y + e_<head>_yaw,
+# h = e_h.  The same scaled rank test applies.  Yaw from two heads at different times
+# is the pair's rows stacked: F_a is the same in both spans and each span's
+# unobservable subspace is F_a-invariant (so e^{F_a t}-invariant), hence what neither
+# span sees is the intersection, the null space of the stacked rows' matrix.
+
+BIAS_NAMES = ("earth_roll", "dss_yaw", "cass1_yaw", "cass2_yaw")
+HEADS = ("dss", "cass1", "cass2")          # yaw from head h carries bias f"{h}_yaw"
+_CLEAN = 1e-6   # entries of a scaled null vector below this are rounding (see _directions)
+
+
+def augmented_dynamics(F, n_biases: int) -> np.ndarray:
+    """F_a = blockdiag(F, 0_{n_biases})."""
+    F = np.asarray(F, dtype=float)
+    n = F.shape[0]
+    Fa = np.zeros((n + n_biases, n + n_biases))
+    Fa[:n, :n] = F
+    return Fa
+
+
+def augmented_rows(kinds, biases, keep=None) -> np.ndarray:
+    """Measurement rows on [x, b] (x the paper's states ``keep``, default all nine; b
+    the ``biases``, in ``BIAS_NAMES`` order): 'roll', 'h' and 'yaw:<head>'."""
+    keep = list(range(len(STATE_NAMES))) if keep is None else list(keep)
+    rows = measurement_rows()
+    G = np.zeros((len(kinds), len(keep) + len(biases)))
+    for i, kind in enumerate(kinds):
+        base, _, head = kind.partition(":")
+        G[i, :len(keep)] = rows[base][keep]
+        bias = "earth_roll" if base == "roll" else f"{head}_yaw" if base == "yaw" else None
+        if bias in biases:
+            G[i, len(keep) + list(biases).index(bias)] = 1.0
+    return G
+
+
+@dataclass(frozen=True)
+class BiasConfiguration:
+    """A measurement configuration of the augmented state: (F_a, G_a) and state names."""
+
+    name: str
+    description: str
+    F: np.ndarray
+    G: np.ndarray
+    names: tuple[str, ...]
+
+
+def bias_configurations(p: ModelParams, biases) -> list[BiasConfiguration]:
+    """The paper's configurations (G, G″, G′) on the state augmented with ``biases``;
+    G once per head giving the yaw, and once with yaw from the DSS and, at other
+    times, CASS1 (the day's order: a CASS in the morning, the DSS before the gap)."""
+    biases = tuple(b for b in BIAS_NAMES if b in biases)
+    F = dynamics_matrix(p)
+    every = list(range(F.shape[0]))
+    no_ncz = [i for i in every if i != NCZ]
+    specs = [
+        ("G+b dss", "roll, yaw from the DSS, h", ("roll", "yaw:dss", "h"), every),
+        ("G+b cass1", "roll, yaw from CASS1, h", ("roll", "yaw:cass1", "h"), every),
+        ("G+b cass2", "roll, yaw from CASS2, h", ("roll", "yaw:cass2", "h"), every),
+        ("G+b dss|cass1", "roll, h, yaw from the DSS, at other times CASS1",
+         ("roll", "yaw:dss", "yaw:cass1", "h"), every),
+        ("G''+b", "roll, h: the Sun gap (Eq. 27)", ("roll", "h"), every),
+        ("G'+b", "roll, h; no N_cz (Eqs. 28-30)", ("roll", "h"), no_ncz),
+    ]
+    return [BiasConfiguration(name, text, augmented_dynamics(F[np.ix_(keep, keep)],
+                                                             len(biases)),
+                              augmented_rows(kinds, biases, keep),
+                              tuple(STATE_NAMES[i] for i in keep) + biases)
+            for name, text, kinds, keep in specs]
+
+
+def _directions(F, G, names, tol: float | None = None) -> list[dict[str, float]]:
+    """A basis of the unobservable subspace as readable vectors: each has one pivot
+    state with coefficient 1 and 0 on the other vectors' pivots (pivots chosen among
+    the biases first, then the attitude, then the rest), in the original units.  The
+    reduction is done on the scaled null vectors (``scaled_observability``), whose
+    entries are unit-free: their rounding is ≈ eps/σ_min ≲ 1e-7 (σ_min ≈ 1e-9, the
+    deepest structural singular value), so entries below 1e-6 are dropped."""
+    n = np.shape(F)[0]
+    M, s = scaled_observability(F, G)
+    tol = default_tol(M.shape[0], n) if tol is None else tol
+    _, sv, Vt = np.linalg.svd(M)
+    rank = int(np.sum(sv / sv[0] > tol))
+    Z = Vt[rank:].T.copy()
+    order = [i for i, nm in enumerate(names) if nm in BIAS_NAMES] + \
+        [names.index(nm) for nm in ("roll", "yaw", "h") if nm in names] + list(range(n))
+    pivots: list[int] = []
+    for i in dict.fromkeys(order):
+        free = [j for j in range(Z.shape[1]) if j not in [c for _, c in pivots]]
+        if not free:
+            break
+        j = max(free, key=lambda c: abs(Z[i, c]))
+        if abs(Z[i, j]) < _CLEAN:
+            continue
+        Z[:, j] /= Z[i, j]
+        for c in range(Z.shape[1]):
+            if c != j:
+                Z[:, c] -= Z[i, c] * Z[:, j]
+        pivots.append((i, j))
+    out = []
+    for i, j in pivots:
+        z = np.where(np.abs(Z[:, j]) < _CLEAN, 0.0, Z[:, j])
+        x = s * z / s[i]
+        out.append({names[k]: float(x[k]) for k in [i, *(k for k in np.flatnonzero(z) if k != i)]})
+    return out
+
+
+def _words(v: dict[str, float], G, names, p: ModelParams) -> str:
+    """One unobservable direction in words."""
+    states = list(v)
+    pivot = states[0]
+    if len(states) == 1:
+        seen = np.any(G[:, names.index(pivot)] != 0)
+        return f"{pivot} alone" + ("" if seen else ": no measurement sees it")
+    terms = ", ".join(f"{k} {c:+.4g}" for k, c in v.items())
+    why = []
+    hold = -p.omega0_radps * p.H_Nms          # N_c/offset of a held offset (Eq. 11)
+    for angle, torque in (("roll", "N_cx"), ("yaw", "N_cz")):
+        if angle in v and torque in v and np.isclose(v[torque] / v[angle], hold, rtol=1e-6):
+            text = f"a constant {angle} offset held by the constant torque {torque} = " \
+                   f"-ω0 H·{angle} ({hold:.4g} N m/rad)"
+            hidden = [b for b in v if b in BIAS_NAMES and np.isclose(v[b], -v[angle])]
+            if hidden:
+                text += f", hidden from the measured {angle} by " + \
+                    (f"{hidden[0]} = -{angle}" if len(hidden) == 1 else
+                     " = ".join(hidden) + f" = -{angle}: their common part only, their "
+                     "differences are observable")
+            why.append(text)
+    return f"together {terms}" + (f" ({'; '.join(why)})" if why else "")
+
+
+def bias_observability_results(p: ModelParams, biases, tol: float | None = None
+                               ) -> list[dict]:
+    """Per augmented configuration: ranks, full-rank power, margins, the unobservable
+    directions (pivot-1 vectors, ``_directions``) and each bias's status: 'observable',
+    'unobservable' (alone) or 'combined' (only together with other states)."""
+    out = []
+    for c in bias_configurations(p, biases):
+        ranks = rank_progression(c.F, c.G, tol)
+        dirs = _directions(c.F, c.G, c.names, tol)
+        status = {}
+        for b in c.names[len(c.names) - sum(nm in BIAS_NAMES for nm in c.names):]:
+            hit = [d for d in dirs if b in d]
+            status[b] = "observable" if not hit else \
+                "unobservable" if any(list(d) == [b] for d in hit) else "combined"
+        out.append({"name": c.name, "description": c.description, "ranks": ranks.tolist(),
+                    "n": len(c.names), "full_rank_power": full_rank_power(ranks),
+                    "margins": rank_margins(c.F, c.G, tol), "directions": dirs,
+                    "words": [_words(d, c.G, list(c.names), p) for d in dirs],
+                    "status": status})
+    return out
+
+
+def format_bias_table(p: ModelParams, biases, tol: float | None = None) -> str:
+    """Section 4's method on the state augmented with ``biases``: rank after each
+    power k and the unobservable directions, in words."""
+    biases = tuple(b for b in BIAS_NAMES if b in biases)
+    res = bias_observability_results(p, biases, tol)
+    kmax = max(r["n"] for r in res)
+    width = max(len(r["name"] + r["description"]) for r in res) + 4
+    head = f"{'configuration':<{width}}" + "".join(f"{f'k={k}':>5}" for k in range(kmax))
+    head += f"{'full at':>14}"
+    lines = [f"With sensor-bias states {', '.join(biases)} (not in the paper): F_a = "
+             "blockdiag(F, 0), roll = r + b_roll, yaw = y + b_head", "",
+             head, "-" * len(head)]
+    for r in res:
+        cells = "".join(f"{v:>5d}" for v in r["ranks"]) + " " * 5 * (kmax - len(r["ranks"]))
+        full = f"never ({r['ranks'][-1]}/{r['n']})" if r["full_rank_power"] is None \
+            else f"k={r['full_rank_power']}"
+        lines.append(f"{r['name'] + ': ' + r['description']:<{width}}{cells}{full:>14}")
+    for r in res:
+        kept, dropped = r["margins"]
+        lines += ["", f"{r['name']} (smallest kept σ/σmax {kept:.1e}, largest dropped "
+                  f"{dropped:.1e}): " + ", ".join(f"{b} {st}" for b, st in r["status"].items())]
+        lines += [f"  unobservable: {w}" for w in r["words"]]
     return "\n".join(lines)

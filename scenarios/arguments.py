@@ -69,6 +69,26 @@ def _tuned_arg(p: argparse.ArgumentParser) -> None:
                    "in place of the scenario's; summary.json says so")
 
 
+def _pair(text: str) -> tuple[str, str]:
+    name, sep, value = text.partition("=")
+    if not (sep and name.strip() and value.strip()):
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE")
+    return name.strip(), value.strip()
+
+
+def _telemetry_args(p: argparse.ArgumentParser) -> None:
+    """How a telemetry file that is not dynprop's own is read: the scenario's
+    ``telemetry`` section, key by key (docs/telemetry.md)."""
+    p.add_argument("--column", action="append", default=[], type=_pair, metavar="NAME=FILECOL",
+                   help="the file's column of a quantity (repeatable; telemetry.columns.NAME): "
+                   "roll=ES_ROLL, time_utc=UTC, wheel1=TACH1")
+    p.add_argument("--unit", action="append", default=[], type=_pair, metavar="NAME=UNIT",
+                   help="the unit of a column as the file holds it (repeatable; "
+                   "telemetry.units.NAME): roll=urad, yaw=rad, wheels=rad/s")
+    p.add_argument("--epoch-utc", metavar="ISO8601", help="the epoch of the file's t_s "
+                   "column when the file does not say (telemetry.epoch_utc)")
+
+
 def _noise_keys(text: str) -> tuple[str, ...]:
     return tuple(part.strip() for part in text.split(",") if part.strip())
 
@@ -127,6 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="override a scenario key (repeatable, after --tuned-from's); "
                      "VALUE is YAML")
     est.set_defaults(seed=None, duration_s=None)   # as load_with_overrides reads them
+    _telemetry_args(est)
     _tuned_arg(est)
     _out_args(est, "new output directory")
     sub.add_parser("scenarios", help="list the bundled scenarios")
@@ -135,7 +156,10 @@ def build_parser() -> argparse.ArgumentParser:
     template.add_argument("scenario", nargs="?", metavar="NAME",
                           help="a bundled name or a YAML path whose values to print "
                           "(default: the GOES-Next defaults)")
-    _scenario_command(sub, "observability", "rank tables of the paper's Section 4")
+    obs = _scenario_command(sub, "observability", "rank tables of the paper's Section 4")
+    obs.add_argument("--biases", choices=("scenario", "all"), default="scenario",
+                     help="the sensor-bias states to append to the state: those the "
+                     "scenario switches on (estimator.bias_states; default), or all four")
     _scenario_command(sub, "covariance", "steady-state yaw accuracy of Section 6")
     _scenario_command(sub, "linearization", "linearization-validation report: Jacobian vs "
                       "the paper, nonlinear vs linear propagation, error budget",

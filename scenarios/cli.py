@@ -35,11 +35,23 @@ def _tuned(args) -> tuple[list[str], dict | None]:
     return tuned_noise(args.tuned_from)
 
 
+def _telemetry_overrides(args) -> list[str]:
+    """``--column``, ``--unit`` and ``--epoch-utc`` as the ``telemetry`` keys they set
+    (names and epochs quoted, so that YAML reads them as text: a column ``ON``)."""
+    import json
+    out = [f"telemetry.columns.{k}={json.dumps(v)}" for k, v in getattr(args, "column", [])]
+    out += [f"telemetry.units.{k}={json.dumps(v)}" for k, v in getattr(args, "unit", [])]
+    if getattr(args, "epoch_utc", None) is not None:
+        out.append(f"telemetry.epoch_utc={json.dumps(args.epoch_utc)}")
+    return out
+
+
 def load_with_overrides(args, streams: bool = False):
-    """The scenario with --set, --seed and --duration-s applied (validated together).
+    """The scenario with --set, --seed and --duration-s applied (validated together),
+    after `estimate`'s --column, --unit and --epoch-utc (the ``telemetry`` keys).
     A command that holds whole arrays (``streams=False``) refuses runs over 30 days."""
     from .config.loader import load_scenario
-    overrides = _tuned(args)[0] + list(args.set)
+    overrides = _tuned(args)[0] + _telemetry_overrides(args) + list(args.set)
     if args.seed is not None:
         overrides.append(f"seed={args.seed}")
     if args.duration_s is not None:
@@ -201,11 +213,13 @@ def _cmd_tune(args) -> int:
 
 
 def _cmd_observability(args) -> int:
-    from dynprop.estimator.observability import format_rank_table
+    from dynprop.estimator.observability import BIAS_NAMES, format_rank_table
 
     from .config.build import estimator_model
-    params, _ = estimator_model(load_with_overrides(args))
-    print(format_rank_table(params))
+    s = load_with_overrides(args)
+    params, _ = estimator_model(s)
+    biases = BIAS_NAMES if args.biases == "all" else s.estimator.bias_states.on()
+    print(format_rank_table(params, biases=biases))
     return 0
 
 

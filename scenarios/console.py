@@ -54,8 +54,13 @@ def estimate_lines(name: str, summary: dict, step_s: float, seconds: float) -> l
     gaps = tel.get("cadence_note") or (
         f"{tel['missing_steps']} without a row, {tel['dropouts']} dropouts, longest "
         f"{tel['longest_dropout_s']:g} s")
-    lines = [f"{name}: filtered {tel['rows']} telemetry rows on {tel['filter_steps']} steps "
-             f"of {step_s:g} s ({gaps}) in {seconds:.1f} s"]
+    if tel.get("on_filter_grid", True):
+        lines = [f"{name}: filtered {tel['rows']} telemetry rows on {tel['filter_steps']} "
+                 f"steps of {step_s:g} s ({gaps}) in {seconds:.1f} s"]
+    else:
+        lines = [f"{name}: filtered {tel['rows']} telemetry rows, each at its own time "
+                 f"({tel['dropouts']} dropouts, longest {tel['longest_dropout_s']:g} s; "
+                 f"{tel['cadence_note']}) in {seconds:.1f} s"]
     eq55 = f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg"
     sigmas = summary["yaw_sigma_at_gap_end_deg"]
     if summary["yaw_error_rms_deg"] is None:

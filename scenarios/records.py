@@ -48,6 +48,10 @@ class FilterHistory:
     innovation_var: np.ndarray
     backend: str
     P_nees: np.ndarray | None = None
+    # With sensor-bias states or a gate (``run.filtering``): estimate.csv's bias columns
+    # at every sample, and the gate's rejections (N, 3).
+    bias_columns: dict | None = None
+    rejected: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

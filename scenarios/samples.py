@@ -32,3 +32,23 @@ def sun_gaps(yaw_present: np.ndarray, dt_s: float, min_hours: float) -> list[tup
     edges = np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
     pairs = list(zip(edges[::2], edges[1::2], strict=True))
     return [(a, b) for a, b in pairs if (b - a) * dt_s >= min_hours * 3600]
+
+
+def sun_gaps_at(yaw_present: np.ndarray, t_s: np.ndarray, min_hours: float
+                ) -> list[tuple[int, int]]:
+    """``sun_gaps`` for samples at their own times ``t_s`` (telemetry off the grid): an
+    outage's length is the time from the last yaw before it to the first after it
+    (or to the last sample), less one median step, which on a regular grid is
+    ``sun_gaps``' (first present − first missing) × Δt."""
+    missing = ~np.asarray(yaw_present, dtype=bool)
+    t = np.asarray(t_s, dtype=float)
+    step = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    edges = np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
+    pairs = list(zip(edges[::2], edges[1::2], strict=True))
+    out = []
+    for a, b in pairs:
+        before = t[a - 1] if a > 0 else t[0] - step
+        after = t[b] if b < len(t) else t[-1] + step
+        if after - before - step >= min_hours * 3600:
+            out.append((a, b))
+    return out

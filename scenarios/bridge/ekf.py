@@ -13,7 +13,7 @@ import numpy as np
 from dynprop.estimator import ekf_model as m
 from dynprop.estimator import model as em
 from dynprop.estimator.ekf import EkfInputs, initial_state
-from dynprop.estimator.preprocess import wheel_torque, yaw_momentum
+from dynprop.estimator.preprocess import wheel_torque, wheel_torque_at, yaw_momentum
 
 from ..config import build
 from ..config.schema import Scenario
@@ -39,14 +39,17 @@ def ekf_design(s: Scenario) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
 
 
 def ekf_inputs(s: Scenario, params: em.ModelParams, roll, pitch, yaw, speeds,
-               yaw_sigma=None, sun_head=None, known_Nm=None) -> EkfInputs:
-    """Telemetry arrays (SI) to the EKF's measurements and inputs."""
-    meas, u, _ = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm)
+               yaw_sigma=None, sun_head=None, known_Nm=None, t_s=None) -> EkfInputs:
+    """Telemetry arrays (SI) to the EKF's measurements and inputs (``t_s``: the
+    samples' own times, for telemetry off the grid)."""
+    meas, u, _ = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm,
+                               t_s)
     H = params.H_Nms
     Nx, Nz, Nw = em.input_torques(params, u)
     Hm = yaw_momentum(speeds, build.build_spacecraft(s).momentum_factors(1))
     Hm = np.where(np.isfinite(Hm), Hm, H)
-    Hdot = wheel_torque(Hm, s.sample_interval_s, s.estimator.wheel_torque_window_s)
+    Hdot = (wheel_torque(Hm, s.sample_interval_s, s.estimator.wheel_torque_window_s)
+            if t_s is None else wheel_torque_at(t_s, Hm, s.estimator.wheel_torque_window_s))
     z = np.column_stack([meas.roll_rad, pitch, meas.yaw_rad, meas.h_Nms])
     r = meas.r()
     r = np.column_stack([r[:, 0], r[:, 0], r[:, 1], r[:, 2]])

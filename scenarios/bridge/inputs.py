@@ -14,7 +14,12 @@ from __future__ import annotations
 import numpy as np
 from dynprop.estimator import model as em
 from dynprop.estimator.kalman import ExtraNoise
-from dynprop.estimator.preprocess import prepare, quantisation_inflation
+from dynprop.estimator.preprocess import (
+    cadence,
+    prepare,
+    prepare_at_times,
+    quantisation_inflation,
+)
 from dynprop.estimator.transition import discretize
 from dynprop.sim.telemetry import Telemetry
 
@@ -34,7 +39,7 @@ def initial_prior(s: Scenario, params: em.ModelParams) -> tuple[np.ndarray, np.n
     return np.zeros(em.N_STATES), np.diag(np.square(sig))
 
 
-def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
+def yaw_correlation_inflation(s: Scenario, sun_head, dt_s: float | None = None) -> np.ndarray:
     """Per-sample factor on the ground yaw variance for the filter
     (``estimator.preprocess.quantisation_inflation``).
 
@@ -45,9 +50,10 @@ def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
     one 0.125° quantum, yaw e²/σ² was 11 in DSS periods; with 600 s it is 1.3, and
     the yaw RMS drops from 0.024° to 0.014°.  A CASS (white 1° noise) uses the time
     the Sun takes to cross a quantum, q/(ω0 Δt) samples, and is barely changed.
-    Heads are telemetry ``sun_head`` indices."""
+    Heads are telemetry ``sun_head`` indices; ``dt_s`` the telemetry's cadence (the
+    scenario's sample interval if None)."""
     w0 = build.orbit(s).rate_radps
-    dt = s.sample_interval_s
+    dt = s.sample_interval_s if dt_s is None else dt_s
     heads = [s.sensors.sun.dss, s.sensors.sun.cass1, s.sensors.sun.cass2]
     factors = []
     for h in heads:
@@ -63,31 +69,40 @@ def yaw_correlation_inflation(s: Scenario, sun_head) -> np.ndarray:
 
 
 def prepared_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
-                    known_Nm=None):
+                    known_Nm=None, t_s=None):
     """Telemetry arrays to the filter's measurements and inputs
     (``estimator.preprocess.FilterInputs``, with a dropout's measured wheel noise).
     ``known_Nm`` (N, 2), roll and yaw torques known per sample, joins the modelled
-    N_x*, N_z* (Eq. 9)."""
+    N_x*, N_z* (Eq. 9).  ``t_s``: the samples' own times, for telemetry off the
+    scenario's grid (``estimator.steps``); None on the grid."""
     e = s.estimator
     if yaw_sigma is not None and sun_head is not None:
-        yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head))
+        dt = None if t_s is None else cadence(t_s)
+        yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head, dt))
     nx, nz = e.model_torques.roll_Nm, e.model_torques.yaw_Nm
     if known_Nm is not None:
         nx, nz = nx + known_Nm[:, 0], nz + known_Nm[:, 1]
+    if t_s is not None:
+        return prepare_at_times(params, t_s, roll, yaw, speeds, build.yaw_factors(s),
+                                build.estimator_sensor_specs(s), yaw_sigma, nx, nz,
+                                e.wheel_torque_window_s)
     return prepare(params, s.sample_interval_s, roll, yaw, speeds, build.yaw_factors(s),
                    build.estimator_sensor_specs(s), yaw_sigma, nx, nz, e.wheel_torque_window_s)
 
 
 def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
-                  known_Nm=None):
+                  known_Nm=None, t_s=None):
     """Telemetry arrays to the filter's measurements, inputs u and any dropout noise
-    (``ExtraNoise`` or None); ``prepared_inputs`` says what each is."""
+    (``ExtraNoise`` or None); ``prepared_inputs`` says what each is.  With ``t_s`` the
+    dropout noise's unit matrix is each step's own (``estimator.steps.StepTable``), and
+    ``ExtraNoise.Qd_unit`` is not used."""
     e = s.estimator
-    inputs = prepared_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm)
+    inputs = prepared_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm,
+                             t_s)
     extra = None
     if inputs.wheel_noise is not None:
-        unit = discretize(params, em.ProcessNoise(q_x=0.0, q_z=0.0, q_w=1.0),
-                          s.sample_interval_s).Qd
+        unit = np.zeros((em.N_STATES, em.N_STATES)) if t_s is not None else discretize(
+            params, em.ProcessNoise(q_x=0.0, q_z=0.0, q_w=1.0), s.sample_interval_s).Qd
         # The bridge's measured q_w is the whole wheel-torque uncertainty there; the
         # filter's own q_w already carries part of it.
         extra = ExtraNoise(np.maximum(inputs.wheel_noise - e.process_noise.q_w, 0.0), unit)

@@ -30,11 +30,25 @@ DISPERSION_STREAM = len(STREAMS)
 # past DISPERSION_STREAM rather than one more of STREAMS, which would move
 # DISPERSION_STREAM and with it every Monte Carlo case's dispersed values.
 DISTURBANCE_STREAM = DISPERSION_STREAM + 1
+# Sensor j of OUTLIER_SENSORS draws its outliers from SeedSequence(seed, spawn_key=(run,
+# OUTLIER_STREAM, j)), past DISTURBANCE_STREAM for the same reason; they are drawn only
+# by a sensor with outliers (sim.sensors' module doc), so none of the streams above moves.
+OUTLIER_STREAM = DISTURBANCE_STREAM + 1
+OUTLIER_SENSORS = ("earth", "tachometer", "dss", "cass1", "cass2")
 
 
 def streams(seed: int, run: int = 0) -> dict[str, np.random.Generator]:
-    return {name: np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, i)))
-            for i, name in enumerate(STREAMS)}
+    """Run ``run``'s generators by name (STREAMS); each sensor's is a
+    ``sensors.NoiseStream``, which draws as the plain generator would and carries the
+    generator of its outliers (``OUTLIER_STREAM``), made but drawn from only when the
+    sensor has outliers."""
+    def make(i: int, name: str) -> np.random.Generator:
+        noise = np.random.SeedSequence(seed, spawn_key=(run, i))
+        if name not in OUTLIER_SENSORS:
+            return np.random.default_rng(noise)
+        return sensors.NoiseStream(noise, np.random.SeedSequence(
+            seed, spawn_key=(run, OUTLIER_STREAM, OUTLIER_SENSORS.index(name))))
+    return {name: make(i, name) for i, name in enumerate(STREAMS)}
 
 
 def disturbance_generator(s: Scenario, run: int = 0) -> np.random.Generator | None:
@@ -100,17 +114,19 @@ def build_initial(s: Scenario) -> InitialState:
 def _head(name: str, h: SunHead) -> sensors.SunSensorHead:
     return sensors.SunSensorHead(name, h.kind, h.boresight_hour_angle_deg, h.fov_in_plane_deg,
                                  h.fov_out_of_plane_deg, h.quantum_deg, h.noise_deg,
-                                 h.in_plane_bias_deg, h.out_of_plane_bias_deg)
+                                 h.in_plane_bias_deg, h.out_of_plane_bias_deg,
+                                 h.outlier_rate, h.outlier_size)
 
 
 def build_sensors(s: Scenario) -> sensors.SensorSuite:
     c = s.sensors
     return sensors.SensorSuite(
         sensors.EarthSensor(c.earth.noise_deg, c.earth.quantum_deg, c.earth.roll_bias_deg,
-                            c.earth.pitch_bias_deg),
+                            c.earth.pitch_bias_deg, c.earth.outlier_rate, c.earth.outlier_size),
         (_head("dss", c.sun.dss), _head("cass1", c.sun.cass1), _head("cass2", c.sun.cass2)),
         sensors.Tachometer(c.tachometer.quantum_rpm, c.tachometer.noise_3sigma_rpm,
-                           c.tachometer.bias_rpm),
+                           c.tachometer.bias_rpm, c.tachometer.outlier_rate,
+                           c.tachometer.outlier_size),
         c.noise.enabled)
 
 
@@ -156,3 +172,48 @@ def truth_stream(s: Scenario, rng: np.random.Generator, duration_s: float | None
                        s.duration_s if duration_s is None else duration_s,
                        s.sample_interval_s if dt_s is None else dt_s, rng=rng, model=model,
                        disturbance=build_disturbance(s), disturbance_rng=disturbance_rng)
+
+
+def bias_model(s: Scenario):
+    """The filter's sensor-bias states (``estimator.bias_states``, those not 'off', in
+    the schema's order) as an ``estimator.augmented.BiasModel``: prior 1σ in rad and
+    random-walk density q = (walk_deg_per_sqrt_h · π/180)² / 3600 rad²/s (a 1σ growth of
+    walk degrees over an hour); None when every bias is off (the paper's filter)."""
+    from dynprop.estimator.augmented import BiasModel
+    states = s.estimator.bias_states
+    on = [(name, getattr(states, name)) for name in states.on()]
+    if not on:
+        return None
+    return BiasModel(tuple(name for name, _ in on), tuple(b.sigma_deg * DEG for _, b in on),
+                     tuple((b.walk_deg_per_sqrt_h * DEG) ** 2 / 3600.0 for _, b in on))
+
+
+def truth_biases_rad(s: Scenario) -> dict[str, float]:
+    """The constant sensor errors the truth flies (``sensors.*bias*``), as the filter's
+    bias states (rad): what the filter's roll (r + b) and each head's ground yaw
+    (y + b_head) would see.
+
+    * ``earth_roll``: the Earth sensor's roll bias.
+    * ``dss_yaw``: the DSS's β (out-of-plane) bias, with the same sign (ground −
+      true), exactly, wherever the Sun is in its field of view; its α bias does not
+      move the yaw.  The Earth sensor's roll and pitch biases, by which the ground
+      de-rotates, add nothing on its boresight and change sign across it
+      (``sim.sensors.ground_yaw_sensitivity``), about cot θ per unit at equinox.
+    * ``cass1_yaw``, ``cass2_yaw``: geometry-dependent; given on the head's boresight
+      at the epoch's solar declination δ, the small-angle value
+      Σ ∂ψ/∂(bias) · bias over the head's α and β biases and the Earth sensor's roll
+      and pitch biases.  At equinox on the boresight that is β/sin θ_b and
+      roll · cot θ_b (cass1: −1.035 β − 0.268 roll; cass2: 3.86 β + 3.73 roll), and it
+      changes across the field of view and with the season.
+    """
+    suite = build_sensors(s)
+    unit, _ = ephemeris.sun_position_eci(ephemeris.julian_date(epoch(s)))
+    dec = float(np.arcsin(np.clip(unit[2], -1.0, 1.0)))
+    e = suite.earth
+    out = {"earth_roll": e.roll_bias_deg * DEG}
+    for head in suite.sun_heads:
+        k = sensors.ground_yaw_sensitivity(head, head.boresight_hour_angle_deg * DEG, dec)
+        out[f"{head.name}_yaw"] = DEG * float(
+            k["in_plane"] * head.in_plane_bias_deg + k["out_of_plane"] * head.out_of_plane_bias_deg
+            + k["roll"] * e.roll_bias_deg + k["pitch"] * e.pitch_bias_deg)
+    return out

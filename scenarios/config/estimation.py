@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, ValidationInfo, field_validator
 
 from ..units import DAY_S
 from .sections import _Section
@@ -47,6 +47,72 @@ class ModelTorques(_Section):
     yaw_Nm: float = Field(0.0, description="N_z*, constant (N m)")
 
 
+class BiasState(_Section):
+    """One sensor-bias state appended to the paper's nine (not in the paper), so that a
+    constant sensor error is estimated rather than taken for attitude: the filter
+    measures roll as r + b_roll and a head's ground yaw as y + b_head.  The bias has
+    no dynamics of its own (a constant, or a random walk).  Off, the filter is the
+    paper's."""
+
+    model: Literal["off", "constant", "random_walk"] = Field(
+        "off", description="'off': no state; 'constant': a random constant, what a "
+        "misalignment or an offset is; 'random_walk': one that drifts, e.g. with "
+        "temperature, at walk_deg_per_sqrt_h")
+    sigma_deg: float = Field(0.01, gt=0, description="the filter's prior 1σ of the bias, "
+                             "its initial estimate being 0; the size of error the sensor "
+                             "may carry (deg)")
+    walk_deg_per_sqrt_h: float = Field(
+        0.0, ge=0, validate_default=True, description="random-walk density as the 1σ "
+        "growth over an hour, σ(t) = walk · √(t/1 h); 0 for 'constant', > 0 for "
+        "'random_walk'; the filter's q = (walk · π/180)² / 3600 (rad²/s) (deg/√h)")
+
+    @field_validator("model", mode="before")
+    @classmethod
+    def _yaml_off(cls, v):
+        # YAML 1.1 reads an unquoted `off` as false: `model: off` means "off".
+        return "off" if v is False else v
+
+    @field_validator("walk_deg_per_sqrt_h")
+    @classmethod
+    def _walk_fits_model(cls, v: float, info: ValidationInfo) -> float:
+        model = info.data.get("model")
+        if model == "random_walk" and v == 0:
+            raise ValueError("must be > 0 with model 'random_walk' (or use model 'constant')")
+        if model == "constant" and v > 0:
+            raise ValueError("must be 0 with model 'constant', which does not walk (or use "
+                             "model 'random_walk')")
+        return v
+
+
+class CassBiasState(BiasState):
+    """A CASS head's ground-yaw bias, yaw = y + b_head while that head gives the yaw: as
+    the DSS's, with a wider prior (0.05°), since a coarse head's errors are larger.  A
+    CASS angle bias moves the ground yaw by an amount that varies with the Sun's
+    place in the head's field of view and with the season, so a constant (or slowly
+    walking) state only approximates it."""
+
+    sigma_deg: float = Field(0.05, gt=0, description="the filter's prior 1σ of the bias, "
+                             "its initial estimate being 0 (deg)")
+
+
+class BiasStates(_Section):
+    """Sensor-bias states appended to the paper's nine states, in this order, each off
+    by default: the Earth sensor's roll bias (roll = r + b_roll) and one ground-yaw
+    bias per Sun-sensor head (yaw = y + b_head while that head gives the yaw).
+    `dynprop observability --biases all` shows which of them the measurements can
+    separate from the attitude (docs/validation.md)."""
+
+    earth_roll: BiasState = Field(default_factory=BiasState)
+    dss_yaw: BiasState = Field(default_factory=BiasState)
+    cass1_yaw: CassBiasState = Field(default_factory=CassBiasState)
+    cass2_yaw: CassBiasState = Field(default_factory=CassBiasState)
+
+    def on(self) -> tuple[str, ...]:
+        """The names of the states that are not 'off', in order."""
+        return tuple(name for name in type(self).model_fields
+                     if getattr(self, name).model != "off")
+
+
 class Estimator(_Section):
     filters: list[Literal["paper", "ekf"]] = Field(
         ["paper"], min_length=1, description="which filters `dynprop run` runs on the same "
@@ -65,9 +131,16 @@ class Estimator(_Section):
         "autocorrelation 0.5 at 8.5 min, because the out-of-plane angle that sets yaw "
         "moves slowly (s)")
     max_gap_s: float = Field(
-        3600.0, gt=0, description="Longest telemetry dropout `dynprop estimate` propagates "
-        "across (samples missing from its grid of sample_interval_s steps: no update, the "
-        "covariance grows); a longer one is rejected with the row where it starts.")
+        3600.0, gt=0, description="Telemetry gap from which `dynprop estimate` warns (s): "
+        "a gap of any length is propagated across (no update, the covariance grows with "
+        "the process noise); one longer than this is listed in summary.json's telemetry "
+        "and warnings.")
+    bias_states: BiasStates = Field(default_factory=BiasStates)
+    outlier_gate_chi2: float | None = Field(
+        None, gt=0, description="per-measurement innovation gate: a roll, yaw or h whose "
+        "ν²/S exceeds it (χ² with 1 degree of freedom) is rejected, so that one outlier "
+        "cannot pull the slow torque and bias states; 25 is 5σ, and below 9 (3σ) good "
+        "measurements are rejected too often; null: no gating, the paper's filter (-)")
 
 
 QUARTER_ORBIT_S = 21541.0   # the correlation time of Eq. 45

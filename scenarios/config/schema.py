@@ -28,6 +28,7 @@ from .sections import (
     Orbit,
     Sensors,
     Spacecraft,
+    Telemetry,
     _Section,
 )
 
@@ -84,6 +85,7 @@ class Scenario(_Section):
     montecarlo: MonteCarlo = Field(default_factory=MonteCarlo)
     output: Output = Field(default_factory=Output)
     trim: Trim = Field(default_factory=Trim)
+    telemetry: Telemetry = Field(default_factory=Telemetry)
 
     @field_validator("dynprop_version", mode="before")
     @classmethod
@@ -166,12 +168,15 @@ def leaf_paths(model: type[BaseModel], prefix: str = "") -> list[str]:
 
 def resolved_yaml(scenario: Scenario) -> str:
     """Every key with its value, defaults filled, stamped with this version; loads
-    back to the same scenario.  The one exception: ``environment.disturbance`` is
-    written only when it differs from its defaults, so that a scenario without one
-    resolves to the very text it did before the section existed (its run directories,
-    and the digest that resumes a Monte Carlo set, unchanged)."""
+    back to the same scenario.  The exceptions: ``environment.disturbance`` and
+    ``telemetry`` are written only when they differ from their defaults, so that a
+    scenario without them resolves to the very text it did before the sections
+    existed (its run directories, and the digest that resumes a Monte Carlo set,
+    unchanged)."""
     data = scenario.model_dump(mode="json")
     if scenario.environment.disturbance == Disturbance():
         del data["environment"]["disturbance"]
+    if scenario.telemetry == Telemetry():
+        del data["telemetry"]
     data["dynprop_version"] = __version__
     return yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)

@@ -15,6 +15,7 @@ from dynprop.sim import control as sim_control
 from dynprop.sim import disturbance as sim_disturbance
 from dynprop.sim import environment as sim_env
 from dynprop.sim import sensors, spacecraft
+from dynprop.sim.ephemeris import parse_epoch
 from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.telemetry import MIN_SUN_SEPARATION_DEG
 from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
@@ -205,8 +206,16 @@ class Control(_Section):
 
 
 class Noise(_Section):
-    enabled: bool = Field(True, description="false turns every random draw off (sensor noise, "
-                          "wheel ripple and the disturbance torque); quantisation stays")
+    enabled: bool = Field(True, description="false turns every random draw off (sensor noise "
+                          "and outliers, wheel ripple and the disturbance torque); "
+                          "quantisation stays")
+
+
+OUTLIER_RATE_TEXT = (
+    "fraction of readings that are outliers, each channel (roll, pitch; α, β; each wheel) "
+    "drawn on its own at every sample from a stream of its own: an outlier reads true + "
+    "bias + noise ± outlier_size · σ, before quantisation; 0 draws nothing (-)")
+OUTLIER_SIZE_TEXT = "an outlier's offset from the noisy reading, with a random sign"
 
 
 class EarthSensor(_Section):
@@ -217,6 +226,9 @@ class EarthSensor(_Section):
                                  "measured = quantised(true + bias + noise) (deg)")
     pitch_bias_deg: float = Field(_EARTH.pitch_bias_deg,
                                   description="constant pitch error, likewise (deg)")
+    outlier_rate: float = Field(_EARTH.outlier_rate, ge=0, le=1, description=OUTLIER_RATE_TEXT)
+    outlier_size: float = Field(_EARTH.outlier_size, ge=0, description=OUTLIER_SIZE_TEXT
+                                + "; σ is noise_deg (σ)")
 
 
 class SunHead(_Section):
@@ -238,6 +250,10 @@ class SunHead(_Section):
                                      "ground yaw does not know it (deg)")
     out_of_plane_bias_deg: float = Field(0.0, description="constant error of the "
                                          "out-of-plane angle β, likewise (deg)")
+    outlier_rate: float = Field(0.0, ge=0, le=1, description=OUTLIER_RATE_TEXT)
+    outlier_size: float = Field(sensors.OUTLIER_SIZE, ge=0, description=OUTLIER_SIZE_TEXT
+                                + "; σ is the angle's noise, a CASS's grown off the "
+                                "boresight as noise_deg says (σ)")
 
 
 # GOES-Next heads, from sim.sensors: the DSS on dusk, two CASS.
@@ -246,7 +262,8 @@ HEAD_DEFAULTS = {
                  fov_in_plane_deg=h.fov_in_plane_deg, fov_out_of_plane_deg=h.fov_out_of_plane_deg,
                  quantum_deg=h.quantum_deg, noise_deg=h.noise_deg,
                  in_plane_bias_deg=h.in_plane_bias_deg,
-                 out_of_plane_bias_deg=h.out_of_plane_bias_deg)
+                 out_of_plane_bias_deg=h.out_of_plane_bias_deg,
+                 outlier_rate=h.outlier_rate, outlier_size=h.outlier_size)
     for h in sensors.goes_next_sun_sensors()
 }
 
@@ -277,6 +294,9 @@ class Tachometer(_Section):
     noise_3sigma_rpm: float = Field(_TACH.noise_3sigma_rpm, ge=0, description="noise, 3σ (rpm)")
     bias_rpm: float = Field(_TACH.bias_rpm, description="constant speed error, the same on "
                             "every wheel: measured = quantised(true + bias + noise) (rpm)")
+    outlier_rate: float = Field(_TACH.outlier_rate, ge=0, le=1, description=OUTLIER_RATE_TEXT)
+    outlier_size: float = Field(_TACH.outlier_size, ge=0, description=OUTLIER_SIZE_TEXT
+                                + "; σ is noise_3sigma_rpm / 3 (σ)")
 
 
 class Sensors(_Section):
@@ -284,3 +304,72 @@ class Sensors(_Section):
     earth: EarthSensor = Field(default_factory=EarthSensor)
     sun: SunSensors = Field(default_factory=SunSensors)
     tachometer: Tachometer = Field(default_factory=Tachometer)
+
+
+# --------------------------------------------------------------------------- telemetry
+
+AngleUnit = Literal["deg", "rad", "urad"]
+SpeedUnit = Literal["rpm", "rad/s"]
+
+
+def _column(name: str, what: str):
+    return Field(name, min_length=1, description=f"the file's column of {what}")
+
+
+class TelemetryColumns(_Section):
+    """The file's column for each quantity, by its name in the file's header (CSV) or
+    schema (Parquet); a key left out reads the column of dynprop's own telemetry.csv.
+    The time is `t_s` or `time_utc`, whichever the file has (`t_s` when it has both);
+    pitch, yaw_sigma and sun_head are optional (docs/telemetry.md)."""
+
+    t_s: str = _column("t_s", "time in seconds from the file's epoch (its `# epoch_utc:` "
+                       "line or Parquet metadata, else telemetry.epoch_utc, else the "
+                       "scenario's epoch_utc)")
+    time_utc: str = _column("time_utc", "ISO 8601 UTC time tags (`2026-03-20T12:00:00.512Z`; "
+                            "without a zone or with +00:00 also read as UTC; another offset "
+                            "is an error), or a Parquet timestamp")
+    roll: str = _column("roll_deg", "Earth-sensor roll")
+    pitch: str = _column("pitch_deg", "Earth-sensor pitch (optional; the EKF's)")
+    yaw: str = _column("yaw_deg", "ground yaw from the Sun sensors, empty where none")
+    yaw_sigma: str = _column("yaw_sigma_deg", "each yaw's a-priori 1σ (optional)")
+    sun_head: str = _column("sun_head", "the Sun-sensor head of each yaw: 0 (dss), 1 (cass1) "
+                            "or 2 (cass2) (optional)")
+    wheel1: str = _column("wheel1_rpm", "wheel 1's tachometer speed")
+    wheel2: str = _column("wheel2_rpm", "wheel 2's tachometer speed")
+
+
+class TelemetryUnits(_Section):
+    """The unit of each column as the file holds it, converted on reading to the
+    degrees and rpm the rest of dynprop uses (the names' suffixes): `deg`, `rad` or
+    `urad` (µrad) for angles, `rpm` or `rad/s` for wheel speeds."""
+
+    roll: AngleUnit = Field("deg", description="unit of telemetry.columns.roll")
+    pitch: AngleUnit = Field("deg", description="unit of telemetry.columns.pitch")
+    yaw: AngleUnit = Field("deg", description="unit of telemetry.columns.yaw")
+    yaw_sigma: AngleUnit = Field("deg", description="unit of telemetry.columns.yaw_sigma")
+    wheels: SpeedUnit = Field("rpm", description="unit of every wheel's column")
+
+
+class Telemetry(_Section):
+    """How `dynprop estimate` (and `tune` and `trim`, which read the same way) reads a
+    telemetry file that is not dynprop's own: its columns, their units and the epoch
+    its time counts from (docs/telemetry.md).  Left out, the file is read as
+    dynprop's own telemetry.csv."""
+
+    columns: TelemetryColumns = Field(default_factory=TelemetryColumns)
+    units: TelemetryUnits = Field(default_factory=TelemetryUnits)
+    epoch_utc: str | None = Field(None, description="ISO 8601 epoch of a t_s column whose "
+                                  "file does not carry one (`dynprop estimate --epoch-utc`); "
+                                  "null: the scenario's epoch_utc")
+    epoch_tolerance_s: float = Field(
+        1.0, ge=0, description="how far the file's epoch (or its first time_utc tag) may be "
+        "from the scenario's epoch_utc; further is an error, since the Sun and orbit geometry "
+        "is computed from the scenario's: at the orbit rate (7.3e-5 rad/s) 1 s moves it by "
+        "0.004°, a tenth of the paper's 0.040° yaw σ (s)")
+
+    @field_validator("epoch_utc")
+    @classmethod
+    def _epoch(cls, v: str | None) -> str | None:
+        if v is not None:
+            parse_epoch(v)
+        return v

@@ -184,5 +184,17 @@ def add_checks(summary: dict) -> dict:
             checks.update(other_filter_checks(name, summary[name],
                                               summary["nees_bounds_95_per_sample"]))
     summary["checks"] = checks
-    summary["warnings"] = warnings_of(checks)
+    summary["warnings"] = warnings_of(checks) + telemetry_warnings(summary)
     return summary
+
+
+def telemetry_warnings(summary: dict) -> list[str]:
+    """A line per telemetry gap longer than ``estimator.max_gap_s`` (`estimate`'s
+    telemetry section): accepted, and worth knowing, since the covariance grows
+    across it."""
+    tel = summary.get("telemetry")
+    gaps = tel.get("gaps_over_max_gap_h") if isinstance(tel, dict) else None
+    return [{"check": "telemetry_gaps",
+             "message": f"telemetry gap of {length:.3g} h from {start:.3g} h is longer than "
+             "estimator.max_gap_s: no measurement across it, the covariance grows with the "
+             "process noise"} for start, length in gaps or ()]

@@ -6,7 +6,10 @@ column name.  Missing values are NaN and are written as empty fields.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from dynprop.sim.ephemeris import parse_epoch
 
 from ..units import RAD2DEG, RADPS2RPM
 
@@ -137,3 +140,49 @@ def telemetry_columns(tel, suite) -> dict[str, np.ndarray]:
             name = f"{head.name}_{angle}_deg"
             cols[name] = as_decimal_reading(values[:, k] * RAD2DEG, quantum[name])
     return cols
+
+
+def epoch_ns(epoch_utc: str) -> np.datetime64:
+    """An ISO 8601 epoch with a zone (``sim.ephemeris.parse_epoch``) as UTC
+    datetime64[ns]."""
+    return np.datetime64(parse_epoch(epoch_utc).replace(tzinfo=None), "ns")
+
+
+def utc_text(instants: np.ndarray) -> np.ndarray:
+    """datetime64[ns] instants as ISO 8601 UTC text ending in Z, to the finest unit
+    any of them needs (s, ms, µs or ns): ``2026-03-20T12:00:00Z``."""
+    ns = np.asarray(instants, dtype="datetime64[ns]")
+    whole = ns.astype(np.int64)
+    unit = next((u for u, d in (("s", 10**9), ("ms", 10**6), ("us", 10**3))
+                 if not np.any(whole % d)), "ns")
+    return np.datetime_as_string(ns, unit=unit, timezone="UTC")
+
+
+@dataclass(frozen=True)
+class UtcTags:
+    """telemetry.csv's ``# epoch_utc:`` first line and its ``time_utc`` column: each
+    row's t_s after the epoch as ISO 8601 UTC, in milliseconds when the step is a
+    whole number of them (0.512 s: ``2026-03-20T12:00:00.512Z``), else microseconds.
+    One unit per file, so a file written a window at a time has the bytes of one
+    written whole.  ``t_s`` stays the exact time; these tags say what it is."""
+
+    epoch_utc: str
+    unit: str = "ms"
+
+    @classmethod
+    def of(cls, epoch_utc: str, step_s: float) -> UtcTags:
+        ms = step_s * 1e3
+        return cls(epoch_utc, "ms" if abs(ms - round(ms)) < 1e-9 * max(ms, 1.0) else "us")
+
+    def comment(self) -> str:
+        """The first line: the epoch t_s counts from, in UTC."""
+        return f"# epoch_utc: {utc_text(epoch_ns(self.epoch_utc))}\n"
+
+    def text(self, t_s: np.ndarray) -> np.ndarray:
+        """The tags of ``t_s`` (s after the epoch), rounded to the unit (the text
+        itself would cut a 1.5359999999999998 s off to 1.535)."""
+        per_s = {"ms": 1e3, "us": 1e6}[self.unit]
+        offset = np.rint(np.asarray(t_s, dtype=float) * per_s).astype(np.int64)
+        return np.datetime_as_string(epoch_ns(self.epoch_utc)
+                                     + offset.astype(f"timedelta64[{self.unit}]"),
+                                     unit=self.unit, timezone="UTC")

@@ -19,6 +19,10 @@ Two number formats:
   estimate, far below every sensor quantum and every σ the filter reports.  A
   re-read differs from the run's doubles in those digits; the run's summary is
   computed from the doubles.
+
+A file may begin with ``#`` comment lines (telemetry.csv's ``# epoch_utc: ...``,
+``columns.UtcTags``), which ``read_csv`` skips (``comments`` reads them), and hold
+text columns (``TEXT_COLUMNS``: ``time_utc``), which it returns as strings.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..workers import ignore_sigint, sigint_held, worker_pool
-from .columns import decimals_of
+from .columns import UtcTags, decimals_of
 from .rundir import names_file
 
 FMT = "%.10g"
@@ -40,12 +44,19 @@ BLOCK_ROWS = 40_000
 
 
 EXACT_FMT = "%r"  # shortest text that round-trips every double (repr)
+# Columns of text, not numbers: ISO 8601 UTC time tags (``columns.UtcTags``).
+TEXT_COLUMNS = ("time_utc",)
 
 
-def _format_block(block: np.ndarray, fmt_one: str = FMT, lattices=None) -> str:
+def _format_block(block: np.ndarray, fmt_one: str = FMT, lattices=None, tags=None) -> str:
     """Rows of ``block`` as CSV text.  With ``EXACT_FMT``, ``lattices`` may give each
     column's reading quantum (None for a column that has none): see
-    ``_lattice_text``."""
+    ``_lattice_text``.  ``tags`` (a ``columns.UtcTags`` and the index of the t_s
+    column) appends each row's time_utc, formatted here (in the worker) at once."""
+    if tags is not None:
+        utc, k = tags
+        return _format_exact(block, lattices or (None,) * block.shape[1], fmt_one,
+                             utc.text(block[:, k]))
     if fmt_one == EXACT_FMT and lattices is not None and any(lattices):
         return _format_exact(block, lattices)
     fmt = ",".join([fmt_one] * block.shape[1]) + "\n"
@@ -53,19 +64,24 @@ def _format_block(block: np.ndarray, fmt_one: str = FMT, lattices=None) -> str:
     return _empty_nan(text)
 
 
-def _format_exact(block: np.ndarray, lattices) -> str:
-    """``_format_block(block, EXACT_FMT)``, byte for byte, with the quantised columns'
-    text looked up rather than formatted value by value."""
-    cells = np.empty(block.shape, dtype=object)
+def _format_exact(block: np.ndarray, lattices, fmt_one: str = EXACT_FMT,
+                  last: np.ndarray | None = None) -> str:
+    """``_format_block(block, fmt_one)``, byte for byte, with the quantised columns'
+    text looked up rather than formatted value by value (exact text only), and the
+    text column ``last`` after the others, if given."""
+    cells = np.empty((block.shape[0], block.shape[1] + (last is not None)), dtype=object)
     fmts = []
     for j, q in enumerate(lattices):
-        text = _lattice_text(block[:, j], q) if q else None
+        text = _lattice_text(block[:, j], q) if q and fmt_one == EXACT_FMT else None
         if text is None:
-            cells[:, j] = block[:, j]   # Python floats, formatted by %r
-            fmts.append(EXACT_FMT)
+            cells[:, j] = block[:, j]   # Python floats, formatted by fmt_one
+            fmts.append(fmt_one)
         else:
             cells[:, j] = text
             fmts.append("%s")
+    if last is not None:
+        cells[:, -1] = last
+        fmts.append("%s")
     fmt = ",".join(fmts) + "\n"
     return _empty_nan((fmt * block.shape[0]) % tuple(cells.ravel().tolist()))
 
@@ -105,11 +121,13 @@ def _empty_nan(text: str) -> str:
 
 def write_csv(path: Path | str, columns: dict[str, np.ndarray], workers: int | None = None,
               progress=None, exact: bool = False,
-              lattices: dict[str, float] | None = None) -> None:
+              lattices: dict[str, float] | None = None, tags: UtcTags | None = None) -> None:
     """Write named equal-length columns; ``progress(n_rows)`` is called per block.
     ``exact`` writes the shortest round-trip text, so that reading the file back
     gives the very same doubles; ``lattices`` (column name to reading quantum) only
-    makes that faster, never different (``_lattice_text``)."""
+    makes that faster, never different (``_lattice_text``).  ``tags`` puts its
+    ``# epoch_utc:`` line first and a ``time_utc`` column after the others (from
+    ``t_s``), leaving every other byte as it was."""
     names = list(columns)
     data = np.column_stack([np.asarray(columns[k], dtype=float) for k in names])
     blocks = [data[i:i + BLOCK_ROWS] for i in range(0, len(data), BLOCK_ROWS)]
@@ -118,11 +136,12 @@ def write_csv(path: Path | str, columns: dict[str, np.ndarray], workers: int | N
     pool = worker_pool(workers, get_context("fork")) \
         if workers > 1 and len(blocks) > 1 else nullcontext()
     with names_file(path), open(path, "w", newline="") as fh, pool as executor:
-        fh.write(",".join(names) + "\n")
+        fh.write(_header(names, tags))
         fmts = [EXACT_FMT if exact else FMT] * len(blocks)
         quanta = [_quanta(names, lattices)] * len(blocks)
+        tagged = [None if tags is None else (tags, names.index("t_s"))] * len(blocks)
         texts = (executor.map if executor is not None else map)(_format_block, blocks, fmts,
-                                                                quanta)
+                                                                quanta, tagged)
         for block, text in zip(blocks, texts, strict=True):
             fh.write(text)
             if progress is not None:
@@ -131,6 +150,12 @@ def write_csv(path: Path | str, columns: dict[str, np.ndarray], workers: int | N
 
 def _quanta(names: list[str], lattices: dict[str, float] | None) -> tuple | None:
     return None if lattices is None else tuple(lattices.get(n) for n in names)
+
+
+def _header(names: list[str], tags: UtcTags | None) -> str:
+    if tags is None:
+        return ",".join(names) + "\n"
+    return tags.comment() + ",".join([*names, "time_utc"]) + "\n"
 
 
 def _write_quietly(path: Path, columns: dict[str, np.ndarray]) -> None:
@@ -163,28 +188,49 @@ class BackgroundWriter:
         self.process.join()
 
 
-def read_csv(path: Path | str) -> dict[str, np.ndarray]:
-    """Columns of a CSV of numbers (empty fields read as NaN), with NumPy's C parser.
-    A file that is not one raises ValueError in one line naming the file, the row
-    (its line in the file, the header being row 1) and the column."""
+def read_csv(path: Path | str, text=TEXT_COLUMNS, only=None) -> dict[str, np.ndarray]:
+    """Columns of a CSV of numbers (empty fields read as NaN), with NumPy's C parser;
+    leading ``#`` comment lines are skipped.  The columns named in ``text`` are
+    returned as strings (an empty field as ""); with ``only``, just those columns
+    are returned (the others are not parsed).  A file that is not one raises
+    ValueError in one line naming the file, the row (the header being row 1, comment
+    lines not counted) and the column."""
     with open(path) as fh:
         header = fh.readline()
+        while header.startswith("#"):
+            header = fh.readline()
         body = fh.read()
     if not header.strip():
         raise ValueError(f"{path}: the file is empty (no header)" if not body.strip()
                          else f"{path}: row 1 is empty; it must be the header of column names")
     names = header.strip().split(",")
+    wanted = [n for n in names if only is None or n in only]
     if not body.strip():
-        return {name: np.empty(0) for name in names}
+        return {name: np.empty(0, dtype=str if name in text else float) for name in wanted}
     try:
-        return _parse_body(body, names)
+        return _parse_body(body, names, [n for n in wanted if n in text],
+                           [n for n in wanted if n not in text])
     except ValueError:
         # NumPy's message counts rows from the first data row and ends with a hint for
         # its own API (`usecols`); find the row and say what is wrong with it instead.
-        raise ValueError(f"{path}: {_first_bad_row(body, names)}") from None
+        raise ValueError(f"{path}: {_first_bad_row(body, names, wanted, text)}") from None
 
 
-def _first_bad_row(body: str, names: list[str]) -> str:
+def comments(path: Path | str) -> dict[str, str]:
+    """The ``# key: value`` lines a CSV begins with, by key (``# epoch_utc: ...``)."""
+    found = {}
+    with open(path) as fh:
+        for line in fh:
+            if not line.startswith("#"):
+                break
+            key, sep, value = line[1:].partition(":")
+            if sep:
+                found[key.strip()] = value.strip()
+    return found
+
+
+def _first_bad_row(body: str, names: list[str], wanted=None, text=()) -> str:
+    numbers = [n for n in (names if wanted is None else wanted) if n not in text]
     for k, line in enumerate(body.splitlines(), start=2):
         if not line.strip():
             continue
@@ -192,15 +238,16 @@ def _first_bad_row(body: str, names: list[str]) -> str:
         if len(fields) != len(names):
             return (f"row {k} has {len(fields)} value{'s' * (len(fields) != 1)}, but the "
                     f"header (row 1) names {len(names)} column{'s' * (len(names) != 1)}")
-        for name, text in zip(names, fields, strict=True):
+        for name, field in zip(names, fields, strict=True):
             try:
-                float(text.strip() or "nan")
+                if name in numbers:
+                    float(field.strip() or "nan")
             except ValueError:
-                return f"row {k}, column {name}: {text.strip()!r} is not a number"
+                return f"row {k}, column {name}: {field.strip()!r} is not a number"
     return "not a CSV of numbers"
 
 
-def _parse_body(body: str, names: list[str]) -> dict[str, np.ndarray]:
+def _parse_body(body: str, names: list[str], text=(), numbers=None) -> dict[str, np.ndarray]:
     # Empty fields become "nan" so the fast parser can take them.
     body = "\n" + body
     body = body.replace("\n,", "\nnan,").replace(",\n", ",nan\n")
@@ -208,10 +255,29 @@ def _parse_body(body: str, names: list[str]) -> dict[str, np.ndarray]:
         body = body.replace(",,", ",nan,")
     if body.endswith(","):
         body += "nan"
-    data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2)
-    if data.shape[1] != len(names):
-        raise ValueError(f"{data.shape[1]} values per row for {len(names)} columns")
-    return {name: data[:, k] for k, name in enumerate(names)}
+    numbers = names if numbers is None else numbers
+    if not text and numbers == names:
+        data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2)
+        if data.shape[1] != len(names):
+            raise ValueError(f"{data.shape[1]} values per row for {len(names)} columns")
+        return {name: data[:, k] for k, name in enumerate(names)}
+    # Some columns only: NumPy checks no row's length then, so count the commas.
+    while "\n\n" in body:   # blank lines, which the parser skips
+        body = body.replace("\n\n", "\n")
+    rows = body.count("\n") - body.endswith("\n")
+    if body.count(",") != rows * (len(names) - 1):
+        raise ValueError("a row's length differs from the header's")
+    body = body.lstrip("\n")
+    out = {}
+    if numbers:
+        data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2,
+                          usecols=[names.index(n) for n in numbers])
+        out = {name: data[:, k] for k, name in enumerate(numbers)}
+    for name in text:
+        values = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=1, dtype=str,
+                            comments=None, usecols=[names.index(name)])
+        out[name] = np.where(values == "nan", "", values)
+    return {name: out[name] for name in names if name in out}
 
 
 class CsvAppender:
@@ -220,10 +286,11 @@ class CsvAppender:
     blocks changes nothing).  ``close()`` after the last block."""
 
     def __init__(self, path: Path | str, exact: bool = False,
-                 lattices: dict[str, float] | None = None):
+                 lattices: dict[str, float] | None = None, tags: UtcTags | None = None):
         self.path = Path(path)
         self.fmt = EXACT_FMT if exact else FMT
         self.lattices = lattices
+        self.tags = tags   # as write_csv's
         with names_file(self.path):
             self.fh = open(self.path, "w", newline="")  # noqa: SIM115 (closed by close())
         self.names: list[str] | None = None
@@ -235,13 +302,14 @@ class CsvAppender:
     def _append(self, columns: dict[str, np.ndarray]) -> None:
         if self.names is None:
             self.names = list(columns)
-            self.fh.write(",".join(self.names) + "\n")
+            self.fh.write(_header(self.names, self.tags))
         elif list(columns) != self.names:
             raise ValueError(f"{self.path.name}: columns changed between blocks")
         data = np.column_stack([np.asarray(columns[k], dtype=float) for k in self.names])
         quanta = _quanta(self.names, self.lattices)
+        tagged = None if self.tags is None else (self.tags, self.names.index("t_s"))
         for i in range(0, len(data), BLOCK_ROWS):
-            self.fh.write(_format_block(data[i:i + BLOCK_ROWS], self.fmt, quanta))
+            self.fh.write(_format_block(data[i:i + BLOCK_ROWS], self.fmt, quanta, tagged))
 
     def close(self) -> None:
         with names_file(self.path):

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config.schema import Scenario, resolved_yaml
-from .columns import telemetry_columns, telemetry_lattices, truth_columns
+from .columns import UtcTags, telemetry_columns, telemetry_lattices, truth_columns
 from .csvio import write_csv
 
 
@@ -27,9 +27,11 @@ def write_simulation(stage: Path, sim, show_progress: bool | None = None,
     truth = truth_columns(sim.truth, sim.telemetry.sun_visible)
     tel = telemetry_columns(sim.telemetry, sim.suite)
     lattices = telemetry_lattices(sim.suite, sim.telemetry.wheel_speeds_radps.shape[1])
+    # The epoch line and time_utc column say when t_s is (the simulated scenario's epoch).
+    tags = UtcTags.of(sim.scenario.epoch_utc, sim.scenario.sample_interval_s)
     if truth_writer is not None:
         truth_writer(stage / "truth.csv", truth)
-        write_csv(stage / "telemetry.csv", tel, exact=True, lattices=lattices)
+        write_csv(stage / "telemetry.csv", tel, exact=True, lattices=lattices, tags=tags)
         return tel
     rows = len(sim.truth.t_s)
     if show_progress is None:
@@ -44,7 +46,7 @@ def write_simulation(stage: Path, sim, show_progress: bool | None = None,
         update = bar.update if bar is not None else None
         write_csv(stage / "truth.csv", truth, progress=update)
         write_csv(stage / "telemetry.csv", tel, progress=update, exact=True,
-                  lattices=lattices)
+                  lattices=lattices, tags=tags)
     finally:
         if bar is not None:
             bar.close()

@@ -68,10 +68,23 @@ def _per_state(values) -> dict[str, float]:
     return {name: float(v) for name, v in zip(STATE_COLUMNS, values, strict=True)}
 
 
+def _gap_hours(gaps, dt: float, t_s) -> list[list[float]]:
+    """Sun gaps in hours from the first sample: index × Δt on the grid, or from the
+    samples' own times ``t_s`` (telemetry off the grid; an open gap ends a step
+    after the last sample, as on the grid)."""
+    if t_s is None:
+        return [[a * dt / 3600, b * dt / 3600] for a, b in gaps]
+    t = np.asarray(t_s, dtype=float) - t_s[0]
+    step = float(np.median(np.diff(t)))
+    return [[float(t[a]) / 3600, float(t[b] if b < len(t) else t[-1] + step) / 3600]
+            for a, b in gaps]
+
+
 def assemble_summary(s: Scenario, params, backend: str, truth: bool, twin: bool,
-                     f: RunStatistics) -> dict:
+                     f: RunStatistics, t_s=None) -> dict:
     """summary.json's dict from the run's figures ``f``: one key order, one set of
-    keys, whichever computed them."""
+    keys, whichever computed them.  ``t_s``: the samples' times, for telemetry off
+    the grid (None on it)."""
     dt = s.sample_interval_s
     eq55 = eq55_sigma_yaw_deg(s, params)
     nees_b = chi2_bounds(N_STATES, 1)
@@ -86,7 +99,7 @@ def assemble_summary(s: Scenario, params, backend: str, truth: bool, twin: bool,
         "roll_error_rms_deg": f.roll_rms,
         "h_error_rms_Nms": f.h_rms,
         "yaw_error_rms_smoothed_deg": f.yaw_rms_smoothed,
-        "sun_gaps_h": [[a * dt / 3600, b * dt / 3600] for a, b in f.gaps],
+        "sun_gaps_h": _gap_hours(f.gaps, dt, t_s),
         "yaw_error_at_gap_end_deg": f.end_err,
         "yaw_error_linear_at_gap_end_deg": f.end_err_linear,
         "yaw_sigma_at_gap_end_deg": end_sigma,

@@ -69,9 +69,33 @@ def common_samples(t_truth: np.ndarray, t0: float, dt: float, n: int
     return samples, np.flatnonzero(on)[first]
 
 
-def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
+# Off the grid (``telemetry_file.on_grid``), the truth is interpolated linearly to the
+# telemetry's times from rows at most this far apart: at the nutation and orbit rates
+# (a few 1e-4 rad/s at most) the attitude's curvature over 1.1 s leaves < 1e-8 rad,
+# far below the sensors' 1.7e-4 rad quantum.
+INTERPOLATE_MAX_STEP_S = 1.1
+
+
+def _interpolated(path, cols: dict, t_samples: np.ndarray) -> tuple[dict, np.ndarray]:
+    """The truth's columns at those of ``t_samples`` inside its span, and which."""
+    t = cols["t_s"]
+    step = float(np.max(np.diff(t), initial=0.0))
+    if step > INTERPOLATE_MAX_STEP_S:
+        raise RunDirError(
+            f"{path}: the telemetry is off the filter's grid, so the truth is interpolated "
+            f"to its times, and this file's rows are up to {step:g} s apart (at most "
+            f"{INTERPOLATE_MAX_STEP_S:g} s): use `dynprop simulate`'s truth.csv (every sample)")
+    rows = np.flatnonzero((t_samples >= t[0]) & (t_samples <= t[-1]))
+    at = {name: np.interp(t_samples[rows], t, values) for name, values in cols.items()}
+    return at, rows
+
+
+def read_truth(path: Path, s: Scenario, t_grid: np.ndarray, on_grid: bool = True
+               ) -> TruthFromFile:
     """The truth at the grid samples (``t_grid``: the filter's) it has a row for; at
-    least one is needed, or one line saying how to get a file that has them."""
+    least one is needed, or one line saying how to get a file that has them.  For
+    telemetry off the grid (``on_grid`` False: samples at their own times) the truth
+    interpolated to those times (``_interpolated``)."""
     path = Path(path)
     cols = read_input_csv(path, "truth")
     # The optional sources have columns only in runs that flew them: read when the file
@@ -85,7 +109,13 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
         raise RunDirError("\n".join(f"{path}: missing column {c}" for c in missing))
     dt = s.sample_interval_s
     t0, n = float(t_grid[0]), len(t_grid)
-    rows, where = common_samples(cols["t_s"], t0, dt, n)
+    if on_grid:
+        rows, where = common_samples(cols["t_s"], t0, dt, n)
+        at = {name: values[where] for name, values in cols.items()}
+        t_rows = t0 + rows * dt
+    else:
+        at, rows = _interpolated(path, cols, np.asarray(t_grid, dtype=float))
+        t_rows = np.asarray(t_grid, dtype=float)[rows]
     if not len(rows):
         raise RunDirError(
             f"{path}: no row at a time of the telemetry's filter grid ({t0:g} s + k × "
@@ -93,12 +123,11 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray) -> TruthFromFile:
             "truth.csv of the same run or simulation (`dynprop simulate` writes every "
             "sample; `dynprop run` every output.interval_s, a whole multiple of "
             "sample_interval_s)")
-    at = {name: values[where] for name, values in cols.items()}
     euler = np.column_stack([at["yaw_deg"], at["roll_deg"], at["pitch_deg"]]) * DEG
     w_bn = np.column_stack([at["wx_radps"], at["wy_radps"], at["wz_radps"]])
     c_br = dcm_from_euler312(euler[:, 0], euler[:, 1], euler[:, 2])
     w_br = rate_wrt_orbit(c_br, w_bn, build.orbit(s).rate_radps)
     torques = {src: np.column_stack([at[f"{src}_{a}_Nm"] for a in "xyz"])
                for src in sources}
-    return TruthFromFile(t0 + rows * dt, euler, w_br, at["h_Nms"], torques, rows,
+    return TruthFromFile(t_rows, euler, w_br, at["h_Nms"], torques, rows,
                          len(cols["t_s"]))

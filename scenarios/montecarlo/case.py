@@ -14,13 +14,16 @@ import time
 import traceback
 
 import numpy as np
+from dynprop.estimator.augmented import unpack as aug_unpack
 from dynprop.estimator.consistency import nees
 from dynprop.estimator.kalman import unpack
-from dynprop.estimator.model import H_WHEEL, R, Y
+from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
 
+from ..config import build
 from ..config.schema import Scenario
 from ..files.columns import display_factors, telemetry_columns
 from ..run.ekf import other_filters
+from ..run.filtering import BiasedResult, design_of, filter_section
 from ..run.simulate import simulate
 from ..run.whole import run_scenario
 from ..samples import sun_gaps
@@ -48,12 +51,14 @@ def _rms(a) -> float:
 
 
 def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
-                dispersed: dict, epoch_utc: str, extra: dict | None = None
-                ) -> tuple[dict, dict[str, np.ndarray]]:
+                dispersed: dict, epoch_utc: str, extra: dict | None = None,
+                truth_biases: dict | None = None) -> tuple[dict, dict[str, np.ndarray]]:
     """The case record (JSON) and its grid arrays (float32, display units: deg,
     deg/s, N m s, N m).  ``runs`` holds either the full histories or exactly the
     rows of ``case_rows``; so does each filter of ``extra`` (name → result: the
-    filters besides the paper's, ``estimator.filters``)."""
+    filters besides the paper's, ``estimator.filters``).  With sensor-bias states
+    (``run.filtering``), ``truth_biases`` (the flying scenario's, rad) gives the
+    record's ``bias_states`` their truth and the augmented state's NEES."""
     n, dt = len(runs.truth_model), s.sample_interval_s
     grid, gaps, rows = case_rows(s, n, yaw_present)
     full = runs.rows is None
@@ -89,6 +94,9 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
         "yaw_error_max_abs_deg": float(np.max(np.abs(err[on_grid, Y]))) * RAD2DEG,
         "nees_mean": nees_mean,
     }
+    if isinstance(runs.real, BiasedResult):
+        record.update(_bias_record(s, runs.real, runs.truth_model, rows if full else None,
+                                   on_grid, converged, truth_biases))
     arrays = {"t_s": (grid * dt).astype(np.float64),
               "err": (err[on_grid] * f).astype(np.float32),
               "sigma": (sigma[on_grid] * np.abs(f)).astype(np.float32),
@@ -113,6 +121,31 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
         arrays[f"sigma_{name}"] = (sigma_e[on_grid] * np.abs(f)).astype(np.float32)
         arrays[f"nees_{name}"] = nees_e.astype(np.float32)
     return record, arrays
+
+
+def _bias_record(s: Scenario, real, truth_model, rows, on_grid, converged,
+                 truth_biases: dict | None) -> dict:
+    """A case's bias states at its last kept sample against the truth's, and the NEES
+    of the augmented state (the paper's nine and the biases) on the converged grid."""
+    a = real.augmented
+    x, P = (a.x, a.P_packed) if rows is None else (a.x[rows], a.P_packed[rows])
+    keep = np.arange(len(truth_model)) if rows is None else rows
+    names = a.names
+    final = {f"bias_{n}_deg": float(x[-1, N_STATES + j]) * RAD2DEG
+             for j, n in enumerate(names)}
+    sig = np.sqrt(np.diagonal(aug_unpack(P[-1:]), axis1=1, axis2=2))[0]
+    final |= {f"sigma_bias_{n}_deg": float(sig[N_STATES + j]) * RAD2DEG
+              for j, n in enumerate(names)}
+    section = filter_section(s, design_of(s), final, None, truth_biases)
+    record = {"bias_states": section["bias_states"], "nees_mean_augmented": None,
+              "nees_dof_augmented": N_STATES + len(names)}
+    if truth_biases is not None:
+        b = np.array([truth_biases[n] for n in names])
+        truth = np.column_stack([truth_model[keep], np.tile(b, (len(keep), 1))])
+        values = nees(x[on_grid], aug_unpack(P[on_grid]), truth[on_grid])
+        if converged.any():
+            record["nees_mean_augmented"] = float(np.mean(values[converged]))
+    return record
 
 
 def full_arrays(runs) -> dict[str, np.ndarray]:
@@ -143,7 +176,7 @@ def run_case(s: Scenario, case: int, keep_full: bool = False) -> dict:
                             rows=None if keep_full else rows, twin=s.montecarlo.linear_twin)
         extra = other_filters(s, cols, None if keep_full else rows)
         record, arrays = reduce_case(s, runs, present, case, dispersed, flying.epoch_utc,
-                                     extra)
+                                     extra, build.truth_biases_rad(flying))
         full = full_arrays(runs) if keep_full else None
         return {"record": record, "arrays": arrays, "full": full,
                 "wall_s": time.perf_counter() - start}

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config import build
 from ..config.schema import Scenario, resolved_yaml
 from ..files.checks import add_checks
 from ..files.columns import estimate_columns
@@ -23,6 +24,13 @@ from ..files.simulation import write_simulation
 from ..files.summary import assemble_summary, write_summary
 from ..run.ekf import other_filters
 from ..run.estimate import filter_summary
+from ..run.filtering import (
+    bias_columns,
+    design_of,
+    filter_section,
+    final_biases,
+    rejected_counts,
+)
 from ..run.simulate import simulate
 from ..run.statistics import nees_series, whole_run_statistics
 from ..run.whole import run_scenario
@@ -46,7 +54,8 @@ def case_to_directory(s: Scenario, stage: Path, case: int) -> dict:
         written = write_simulation(stage, sim, truth_writer=in_background, scenario=s)
         runs = run_scenario(s, sim, written, run=case, truth_scenario=flying)
         extra = other_filters(s, written)
-        summary = _estimate_and_report(s, runs, written, stage, in_background, extra)
+        summary = _estimate_and_report(s, runs, written, stage, in_background, extra,
+                                       build.truth_biases_rad(flying))
         # Every sample is kept and telemetry.csv written; no daily.csv (one run).
         summary.update(output_interval_s=s.sample_interval_s, telemetry_written=True,
                        daily=None, montecarlo_case=case, epoch_utc=flying.epoch_utc,
@@ -55,7 +64,8 @@ def case_to_directory(s: Scenario, stage: Path, case: int) -> dict:
         if not s.montecarlo.linear_twin:
             runs = replace(runs, linear=None, twin_model=None)
         record, arrays = reduce_case(s, runs, np.isfinite(written["yaw_deg"]), case,
-                                     dispersed, flying.epoch_utc, extra)
+                                     dispersed, flying.epoch_utc, extra,
+                                     build.truth_biases_rad(flying))
         save_case(stage / "montecarlo_case", {"record": record, "arrays": arrays})
         for w in writers:
             w.wait()
@@ -68,11 +78,12 @@ def case_to_directory(s: Scenario, stage: Path, case: int) -> dict:
 
 
 def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
-                         extra: dict) -> dict:
+                         extra: dict, truth_biases: dict | None = None) -> dict:
     t = runs.sim.truth.t_s
     present = np.isfinite(written["yaw_deg"])
     in_background(stage / "estimate.csv",
-                  estimate_columns(t, runs.real.x, runs.real.sigma, runs.params.omega_n_radps))
+                  estimate_columns(t, runs.real.x, runs.real.sigma, runs.params.omega_n_radps)
+                  | bias_columns(runs.real, slice(None)))
     for name, r in extra.items():
         in_background(stage / f"estimate_{name}.csv",
                       estimate_columns(t, r.x, r.sigma, runs.params.omega_n_radps))
@@ -83,6 +94,8 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
                                runs.linear is not None,
                                whole_run_statistics(s, runs, t, present, nees_data))
     summary["filters"] = ["paper", *extra]
+    summary.update(filter_section(s, design_of(s), final_biases(runs.real),
+                                  rejected_counts(runs.real), truth_biases))
     for name, r in extra.items():
         summary[name] = filter_summary(s, name, r, runs.truth_model, t, present)
     # summary.json before the figures, which draw its verdicts and warnings; written

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dynprop.estimator import model as em
 from dynprop.estimator.ekf import EkfResult, ekf_filter
+from dynprop.estimator.steps import step_intervals
 
 from ..bridge.ekf import ekf_design, ekf_inputs, padded_ekf_inputs
 from ..bridge.inputs import telemetry_inputs
@@ -17,16 +18,21 @@ from ..units import DEG
 
 
 def run_ekf(s: Scenario, roll, pitch, yaw, speeds, yaw_sigma=None, sun_head=None,
-            rows=None, keep_nominal: bool = False) -> EkfResult:
+            rows=None, keep_nominal: bool = False, t_s=None) -> EkfResult:
+    """The EKF on telemetry arrays; ``t_s``: the samples' own times, for telemetry off
+    the grid (each step its own Δt, ``estimator.ekf``)."""
     params, _ = build.estimator_model(s)
     pm, wn, X0, P0 = ekf_design(s)
-    inputs = ekf_inputs(s, params, roll, pitch, yaw, speeds, yaw_sigma, sun_head)
-    return ekf_filter(inputs, pm, wn, X0, P0, rows=rows, keep_nominal=keep_nominal)
+    inputs = ekf_inputs(s, params, roll, pitch, yaw, speeds, yaw_sigma, sun_head, t_s=t_s)
+    return ekf_filter(inputs, pm, wn, X0, P0, rows=rows, keep_nominal=keep_nominal,
+                      dt_s=None if t_s is None else step_intervals(t_s))
 
 
-def other_filters(s: Scenario, columns: dict, rows=None) -> dict[str, EkfResult]:
+def other_filters(s: Scenario, columns: dict, rows=None, on_grid: bool = True
+                  ) -> dict[str, EkfResult]:
     """The filters besides the paper's (``estimator.filters``) on telemetry.csv's
-    columns, by name, their histories at ``rows`` (all samples if None)."""
+    columns, by name, their histories at ``rows`` (all samples if None); ``on_grid``
+    False: the samples at their own times ``columns['t_s']``."""
     if "ekf" not in s.estimator.filters:
         return {}
     if "pitch_deg" not in columns:
@@ -34,7 +40,7 @@ def other_filters(s: Scenario, columns: dict, rows=None) -> dict[str, EkfResult]
                           "no pitch_deg column; remove ekf or add the Earth sensor's pitch")
     roll, yaw, speeds, sigma, head = telemetry_inputs(s, columns)
     return {"ekf": run_ekf(s, roll, columns["pitch_deg"] * DEG, yaw, speeds, sigma, head,
-                           rows=rows)}
+                           rows=rows, t_s=None if on_grid else columns["t_s"])}
 
 
 class EkfStream:

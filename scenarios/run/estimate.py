@@ -7,7 +7,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-from dynprop.estimator.kalman import rts_smoother
+from dynprop.estimator.steps import StepTable
 from dynprop.estimator.transition import discretize
 
 from ..bridge.coordinates import model_truth, truth_torques
@@ -20,10 +20,18 @@ from ..files.comparison import comparison_arrays
 from ..files.csvio import write_csv
 from ..files.summary import assemble_summary, write_summary
 from ..records import FilterHistory
-from ..samples import nees_rows, output_rows, sun_gaps
+from ..samples import nees_rows, output_rows, sun_gaps, sun_gaps_at
 from .ekf import other_filters
 from .estimate_truth import comparison_at_rows, filter_row_summary, row_statistics
 from .filter_tally import FilterTally
+from .filtering import (
+    bias_columns,
+    design_of,
+    filter_section,
+    final_biases,
+    paper_smoother,
+    rejected_counts,
+)
 from .statistics import nees_series, whole_run_statistics
 from .whole import TwoRuns, filter_telemetry
 
@@ -35,14 +43,17 @@ def estimate_inputs(s: Scenario, path: Path, truth_path: Path | None = None):
     from ..files.truth_file import read_truth
 
     grid = on_grid(read_telemetry(path, s), s.sample_interval_s, s.estimator.max_gap_s, path)
-    truth = None if truth_path is None else read_truth(truth_path, s, grid.columns["t_s"])
+    truth = None if truth_path is None else read_truth(truth_path, s, grid.columns["t_s"],
+                                                       grid.regular)
     return grid, truth
 
 
-def filter_summary(s: Scenario, name: str, result, truth_model, t_s, present) -> dict:
+def filter_summary(s: Scenario, name: str, result, truth_model, t_s, present,
+                   on_grid: bool = True) -> dict:
     """summary.json's section of a filter besides the paper's, for a run held whole
     (at the Sun gaps the paper's summary uses, ``samples.sun_gaps``)."""
-    gaps = sun_gaps(present, s.sample_interval_s, s.estimator.sun_gap_min_h)
+    gaps = (sun_gaps(present, s.sample_interval_s, s.estimator.sun_gap_min_h) if on_grid
+            else sun_gaps_at(present, t_s, s.estimator.sun_gap_min_h))
     history = FilterHistory(result.x, result.sigma, result.innovations, result.innovation_var,
                             result.backend, P_nees=result.P_packed[nees_rows(0, len(t_s))])
     tally = FilterTally(name)
@@ -74,11 +85,14 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     exactly `run`'s); there is no linear twin (it needs the simulation, not its
     files).  ``sources`` (the input files' names) goes into summary.json."""
     params, noise = build.estimator_model(s)
-    disc = discretize(params, noise, s.sample_interval_s)
-    real, smoother_args = filter_telemetry(s, params, disc, *telemetry_inputs(s, grid.columns))
-    smoothed = rts_smoother(real, disc, **smoother_args)
     t = grid.columns["t_s"]
     n = len(t)
+    # Off the grid, each step propagates over its own interval (``estimator.steps``).
+    disc = (discretize(params, noise, s.sample_interval_s) if grid.regular
+            else StepTable(params, noise, grid.steps))
+    real, smoother_args = filter_telemetry(s, params, disc, *telemetry_inputs(s, grid.columns),
+                                           t_s=None if grid.regular else t)
+    smoothed = paper_smoother(design_of(s), real, disc, **smoother_args)
     sparse = truth is not None and not truth.every_sample(n)
     truth_model = None
     if truth is not None:
@@ -87,13 +101,17 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     runs = TwoRuns(None, None, params, truth_model, None, real, None, smoothed,
                    build.yaw_factors(s),
                    true_euler_rad=None if truth is None else truth.euler_rad)
-    extra = other_filters(s, grid.columns)
+    extra = other_filters(s, grid.columns, on_grid=grid.regular)
     (stage / "scenario.yaml").write_text(resolved_yaml(s))
     # The files at the output cadence, as `run` writes them (``samples.output_rows``).
-    stride = output_stride(s)
+    # Off the grid, a row every output.interval_s of the file's own cadence.
+    step_s = s.sample_interval_s if grid.regular else float(np.median(grid.steps[:-1]))
+    stride = output_stride(s) if grid.regular else max(1, round(
+        s.sample_interval_s * output_stride(s) / step_s))
     k = output_rows(0, n, stride)
     write_csv(stage / "estimate.csv",
-              estimate_columns(t[k], real.x[k], real.sigma[k], params.omega_n_radps))
+              estimate_columns(t[k], real.x[k], real.sigma[k], params.omega_n_radps)
+              | bias_columns(real, k))
     for name, r in extra.items():
         write_csv(stage / f"estimate_{name}.csv",
                   estimate_columns(t[k], r.x[k], r.sigma[k], params.omega_n_radps))
@@ -105,25 +123,31 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
         rows = truth.rows
         base = whole_run_statistics(s, dataclasses.replace(runs, truth_model=None), t,
                                     present, nees_series(dataclasses.replace(
-                                        runs, truth_model=None)))
+                                        runs, truth_model=None)), grid.regular)
         stats, ends, n_real = row_statistics(base, real, smoothed, truth_model, rows, t)
         arrays = comparison_arrays(comparison_at_rows(runs, rows, extra), t[rows],
                                    present[rows], (np.arange(len(rows)), n_real, None),
                                    {c: v[rows] for c, v in grid.columns.items()})
     else:
         nees_data = nees_series(runs)
-        stats = whole_run_statistics(s, runs, t, present, nees_data)
+        stats = whole_run_statistics(s, runs, t, present, nees_data, grid.regular)
         arrays = comparison_arrays(runs.comparison_inputs(extra), t, present, nees_data,
                                    grid.columns)
         ends = [(b, b) for b in gap_ends(stats.gaps, n)]
     np.savez(stage / "comparison.npz", **arrays)
-    summary = assemble_summary(s, params, real.backend, truth is not None, False, stats)
+    summary = assemble_summary(s, params, real.backend, truth is not None, False, stats,
+                               None if grid.regular else t)
     summary["filters"] = ["paper", *extra]
+    # The truth's biases are known only from a simulated run's scenario; a real file's
+    # are what the filter is for.
+    summary.update(filter_section(s, design_of(s), final_biases(real), rejected_counts(real),
+                                  build.truth_biases_rad(s) if truth is not None else None))
     for name, r in extra.items():
         summary[name] = (filter_row_summary(name, r, truth_model, truth.rows, ends, t) if sparse
-                         else filter_summary(s, name, r, truth_model, t, present))
+                         else filter_summary(s, name, r, truth_model, t, present,
+                                           grid.regular))
     # One key set for every summary: `run`'s output keys, for a file filtered row by row.
-    summary.update(output_interval_s=stride * s.sample_interval_s, telemetry_written=None,
+    summary.update(output_interval_s=stride * step_s, telemetry_written=None,
                    daily=None)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s),
                             **_truth_section(truth, t, ends)}

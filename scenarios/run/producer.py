@@ -30,7 +30,7 @@ from ..bridge.inputs import telemetry_inputs
 from ..bridge.twin import TwinTruth, twin_window
 from ..config import build
 from ..config.schema import Scenario
-from ..files.columns import telemetry_columns, telemetry_lattices, truth_columns
+from ..files.columns import UtcTags, telemetry_columns, telemetry_lattices, truth_columns
 from ..files.csvio import CsvAppender
 from ..records import TruthWindow
 from ..samples import output_rows
@@ -76,7 +76,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
         if telemetry_file:
             files["telemetry"] = CsvAppender(
                 Path(out) / "telemetry.csv", exact=True,
-                lattices=telemetry_lattices(suite, stream.spacecraft.n_wheels))
+                lattices=telemetry_lattices(suite, stream.spacecraft.n_wheels),
+                tags=UtcTags.of(s.epoch_utc, s.sample_interval_s))
     twin_filter = TwinFilter(s, params, disc, plan)
     loop = None if steering is None else steering.start(s, stream, out)
     ekf = "ekf" in s.estimator.filters

@@ -13,13 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from dynprop.estimator.consistency import nees
 from dynprop.estimator.ekf import EkfResult
-from dynprop.estimator.kalman import (
-    ExtraNoise,
-    FilterResult,
-    kalman_filter,
-    rts_smoother,
-    unpack,
-)
+from dynprop.estimator.kalman import ExtraNoise, FilterResult, unpack
 from dynprop.estimator.transition import discretize
 
 from ..bridge.inputs import initial_prior, padded_filter_inputs
@@ -28,6 +22,14 @@ from ..config.schema import Scenario
 from ..records import FilterHistory, TruthWindow
 from ..samples import nees_rows
 from .ekf import EkfStream
+from .filtering import (
+    bias_columns,
+    design_of,
+    head,
+    paper_filter,
+    paper_smoother,
+    smoothed_full_x,
+)
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,7 @@ def filtered(s: Scenario, records):
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
     prior = initial_prior(s, params)
+    design = design_of(s)
     ekf = EkfStream(s, params) if "ekf" in s.estimator.filters else None
     prev_tail, cur = None, next(records, None)
     while cur is not None:
@@ -59,18 +62,14 @@ def filtered(s: Scenario, records):
         nxt = None if plan.is_last(cur.index) else next(records, None)
         meas, u, extra = padded_filter_inputs(s, params, prev_tail, cur.measured,
                                               None if nxt is None else nxt.measured, plan.pad)
-        result = kalman_filter(meas, disc, *prior, u=u, extra=extra)
+        result = paper_filter(design, meas, disc, *prior, u=u, extra=extra,
+                              sun_head=cur.measured.sun_head)
         prior = (result.x_next, result.P_next)
         e = None if ekf is None else ekf.window(cur, nxt, plan.pad)
         # The next window's derivative needs only the last samples of this one.
         prev_tail = cur.measured.cut(slice(-plan.pad, None))
         yield Filtered(cur, result, u, extra, e)
         cur = nxt
-
-
-def _head(a: FilterResult, n: int) -> FilterResult:
-    return FilterResult(a.x[:n], a.P_packed[:n], a.innovations[:n], a.innovation_var[:n],
-                        a.x_next, a.P_next, a.backend)
 
 
 @dataclass(frozen=True)
@@ -96,7 +95,8 @@ def _lighten(f: Filtered, smoothed_x: np.ndarray | None) -> Smoothed:
         filters["ekf"] = FilterHistory(e.x, e.sigma, e.innovations, e.innovation_var,
                                        e.backend, P_nees=e.P_packed[k])
     return Smoothed(w, FilterHistory(real.x, real.sigma, real.innovations, real.innovation_var,
-                                     real.backend),
+                                     real.backend, None, bias_columns(real, slice(None)),
+                                     getattr(real, "rejected", None)),
                     nees(real.x[k], unpack(real.P_packed[k]), w.truth_model[k]), smoothed_x,
                     filters)
 
@@ -108,6 +108,7 @@ def smoothed(s: Scenario, records, smooth: bool = True):
     yield plan
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, s.sample_interval_s)
+    design = design_of(s)
     cur = next(records, None)
     while cur is not None:
         nxt = None if plan.is_last(cur.window.index) else next(records, None)
@@ -118,11 +119,11 @@ def smoothed(s: Scenario, records, smooth: bool = True):
                 # The overlap first, from its filtered end; then this window from the
                 # smoothed state where the overlap begins (no joined copy of the two).
                 m = min(plan.overlap, len(nxt.window.t_s))
-                x_after = rts_smoother(
-                    _head(nxt.real, m), disc, u=nxt.u[:m], covariance=False,
+                x_after = smoothed_full_x(paper_smoother(
+                    design, head(nxt.real, m), disc, u=nxt.u[:m], covariance=False,
                     extra=None if nxt.extra is None else ExtraNoise(nxt.extra.scale[:m],
-                                                                    nxt.extra.Qd_unit)).x[0]
-            x = rts_smoother(cur.real, disc, u=cur.u, extra=cur.extra, covariance=False,
-                             x_after=x_after).x
+                                                                    nxt.extra.Qd_unit)))[0]
+            x = paper_smoother(design, cur.real, disc, u=cur.u, extra=cur.extra,
+                               covariance=False, x_after=x_after).x
         yield _lighten(cur, x)
         cur = nxt

@@ -11,7 +11,7 @@ from dynprop.estimator.model import N_STATES, R, Y
 
 from ..config.schema import Scenario
 from ..files.summary import RunStatistics
-from ..samples import NEES_STRIDE, sun_gaps
+from ..samples import NEES_STRIDE, sun_gaps, sun_gaps_at
 from ..units import RAD2DEG
 
 # The wheel control's and the filter's start-up transient (ekf_crossover skips the
@@ -57,14 +57,17 @@ def _comparison(err, err_lin) -> dict:
                                ("h_Nms", 4, 1.0))}
 
 
-def whole_run_statistics(s: Scenario, runs, t_s, yaw_present, nees_data) -> RunStatistics:
+def whole_run_statistics(s: Scenario, runs, t_s, yaw_present, nees_data,
+                         on_grid: bool = True) -> RunStatistics:
     """summary.json's figures of ``runs`` (a ``whole.TwoRuns``); a figure that needs
-    the truth or the linear twin is None without it."""
+    the truth or the linear twin is None without it.  ``on_grid`` False: samples at
+    their own times (telemetry off the grid), Sun gaps measured in time."""
     truth, twin = runs.truth_model is not None, runs.linear is not None
     err = runs.real.x - runs.truth_model if truth else None
     err_lin = runs.linear.x - runs.twin_model if twin else None
     sig = runs.real.sigma
-    gaps = sun_gaps(yaw_present, s.sample_interval_s, s.estimator.sun_gap_min_h)
+    gaps = (sun_gaps(yaw_present, s.sample_interval_s, s.estimator.sun_gap_min_h) if on_grid
+            else sun_gaps_at(yaw_present, t_s, s.estimator.sun_gap_min_h))
     ends = [b for _, b in gaps if b < len(t_s)]
     idx, n_real, n_lin = nees_data
     nees_b = chi2_bounds(N_STATES, 1)

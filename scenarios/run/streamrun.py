@@ -18,6 +18,8 @@ import time
 from itertools import islice
 from pathlib import Path
 
+import numpy as np
+
 from ..config import build
 from ..config.schema import Scenario, output_writes_telemetry, resolved_yaml
 from ..files.checks import add_checks
@@ -30,6 +32,7 @@ from ..units import DAY_S
 from ..workers import blas_one_thread
 from .daily import DailyTally
 from .filter_tally import FilterTally
+from .filtering import design_of, filter_section
 from .process import producer_process
 from .producer import producer
 from .stream import windows_of
@@ -102,6 +105,8 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     extra = {name: (FilterTally(name), CsvAppender(stage / f"estimate_{name}.csv"))
              for name in s.estimator.filters if name != "paper"}
     bar = Progress(n * dt / DAY_S, progress and len(plan.bounds) > 1)
+    design = design_of(s)
+    last_bias, rejected = None, np.zeros(3, dtype=np.int64)
     # The figures need only comparison.npz and daily.csv, so they are drawn while the
     # producer writes the last of its files; a steered run's figure also reads the
     # file the producer writes (trim_loop.csv), so that run draws after it.
@@ -114,6 +119,8 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
                        daily="daily.csv")
         summary["filters"] = list(s.estimator.filters)   # the paper's alone elsewhere
+        summary.update(filter_section(s, design, last_bias, rejected,
+                                      build.truth_biases_rad(s)))
         for name, (figs, _) in extra.items():
             summary[name] = figs.summary()
         if steering is not None:
@@ -132,8 +139,14 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
             daily.add(w, err, err_lin, nees_idx, closed)
             comparison.add(w, nees_idx, err, err_lin)
             k = output_rows(w.start, w.stop, plan.stride) - w.start
+            bias = w.real.bias_columns or {}
             estimate.append(estimate_columns(w.t_s[k], w.real.x[k], w.real.sigma[k],
-                                             params.omega_n_radps))
+                                             params.omega_n_radps)
+                            | {name: v[k] for name, v in bias.items()})
+            if bias:
+                last_bias = {name: v[-1] for name, v in bias.items()}
+            if w.real.rejected is not None:
+                rejected = rejected + w.real.rejected.sum(axis=0)
             for name, (figs, file) in extra.items():
                 figs.add(w.filters[name], w.start, w.truth_model, closed, w.t_s)
                 file.append(estimate_columns(w.t_s[k], w.filters[name].x[k],

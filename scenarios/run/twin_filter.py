@@ -10,11 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from dynprop.estimator.consistency import nees
-from dynprop.estimator.kalman import kalman_filter, unpack
+from dynprop.estimator.kalman import unpack
 
 from ..bridge.inputs import initial_prior, padded_filter_inputs
 from ..records import FilterHistory, Measured, TwinWindow
 from ..samples import nees_rows
+from .filtering import design_of, paper_filter
 
 
 @dataclass(frozen=True)
@@ -37,6 +38,7 @@ class TwinFilter:
     def __init__(self, s, params, disc, plan):
         self.s, self.params, self.disc, self.plan = s, params, disc, plan
         self.prior = initial_prior(s, params)
+        self.design = design_of(s)
         self.prev_tail: Measured | None = None
         self.cur: TwinTelemetry | None = None
 
@@ -56,8 +58,8 @@ class TwinFilter:
         # The covariance is kept only where the NEES is formed: the whole history
         # would be three quarters of the filter's output.
         k = cur.nees_samples()
-        result = kalman_filter(meas, self.disc, *self.prior, u=u, extra=extra,
-                               covariance_rows=k)
+        result = paper_filter(self.design, meas, self.disc, *self.prior, u=u, extra=extra,
+                              sun_head=cur.measured.sun_head, covariance_rows=k)
         self.prior = (result.x_next, result.P_next)
         self.prev_tail = cur.measured.cut(slice(-pad, None))
         # Its NEES from the covariance the filter kept on those samples alone;

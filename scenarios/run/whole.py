@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from dynprop.estimator import model as em
-from dynprop.estimator.kalman import FilterResult, SmootherResult, kalman_filter, rts_smoother
+from dynprop.estimator.kalman import FilterResult, SmootherResult
 from dynprop.estimator.transition import discretize
 
 from ..bridge.coordinates import model_truth, truth_torques
@@ -21,6 +21,7 @@ from ..bridge.twin import linear_twin, measured
 from ..config import build
 from ..config.schema import Scenario
 from ..files.comparison import ComparisonInputs
+from .filtering import design_of, paper_filter, paper_smoother
 from .simulate import Simulation, simulate
 
 
@@ -54,13 +55,18 @@ class TwoRuns:
 
 
 def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
-                     sun_head=None, rows=None) -> tuple[FilterResult, dict]:
+                     sun_head=None, rows=None, t_s=None) -> tuple[FilterResult, dict]:
     """Preprocess telemetry arrays and run the filter; returns the result (the
     history only at ``rows`` if given) and what the smoother needs besides it
-    (``rts_smoother(result, disc, **that)``: the inputs u and any dropout noise)."""
-    meas, u, extra = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head)
+    (``filtering.paper_smoother(design, result, disc, **that)``: the inputs u and any
+    dropout noise).
+    ``t_s``: the samples' own times when they are off the scenario's grid (``disc``
+    then a ``StepTable``)."""
+    meas, u, extra = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head,
+                                   t_s=t_s)
     x0, P0 = initial_prior(s, params)
-    result = kalman_filter(meas, disc, x0, P0, u=u, rows=rows, extra=extra)
+    design = design_of(s)
+    result = paper_filter(design, meas, disc, x0, P0, u, extra, sun_head, rows=rows)
     return result, {"u": u, "extra": extra}
 
 
@@ -103,6 +109,6 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
             twin_model = twin_model.copy()
             twin_model[:, [1, 3]] *= twin_params.omega_n_radps / params.omega_n_radps
         linear, _ = filter_telemetry(s, params, disc, *measured(twin_tel), rows=rows)
-    smoothed = rts_smoother(real, disc, **smoother_args) if smooth else None
+    smoothed = paper_smoother(design_of(s), real, disc, **smoother_args) if smooth else None
     return TwoRuns(sim, twin_tel, params, truth_model, twin_model, real, linear, smoothed,
                    build.yaw_factors(s), None if rows is None else np.asarray(rows))

@@ -30,12 +30,12 @@ def simulate(out: Path, *extra: str, scenario: str = "goes_next_equinox",
 
 def header(path: Path) -> list[str]:
     with open(path) as fh:
-        return fh.readline().rstrip("\n").split(",")
+        return next(line for line in fh if not line.startswith("#")).rstrip("\n").split(",")
 
 
 def column_text(path: Path, name: str) -> list[str]:
     """The raw text of one column, header excluded."""
-    lines = path.read_text().splitlines()
+    lines = [line for line in path.read_text().splitlines() if not line.startswith("#")]
     k = lines[0].split(",").index(name)
     return [line.split(",")[k] for line in lines[1:]]
 

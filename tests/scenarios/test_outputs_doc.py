@@ -71,7 +71,8 @@ def json_keys(obj, skip=USER_DATA) -> set[str]:
 
 
 def csv_columns(path: Path) -> list[str]:
-    return path.read_text().split("\n", 1)[0].split(",")
+    header = next(line for line in path.read_text().splitlines() if not line.startswith("#"))
+    return header.split(",")
 
 
 @pytest.fixture(scope="module")

@@ -56,7 +56,8 @@ def tuned(run) -> tuple[Path, dict, str]:
 
 
 def telemetry_text(run: Path) -> tuple[list[str], list[str]]:
-    lines = (run / "telemetry.csv").read_text().splitlines()
+    lines = [line for line in (run / "telemetry.csv").read_text().splitlines()
+             if not line.startswith("#")]   # the epoch comment: a file is read without it
     return lines[0].split(","), lines[1:]
 
 
