@@ -1,7 +1,9 @@
 """Studies: one-off experiments behind docs/validation.md's tables, run as
 ``python -m dynprop.scenarios.studies.<name>`` and not by any command:
 ``ekf_crossover`` (where the paper's filter gives way to the EKF) and
-``trim_batch`` (σ of the trim-tab estimate against the batch length).
+``trim_batch`` (σ of the trim-tab estimate against the batch length) and
+``bias_states`` (the filter with sensor-bias states against the paper's, on one Monte
+Carlo set).
 
 May import every room below the command layer (``run``, the analyses, ``figures``
 and what they import); nothing imports them.
