@@ -95,8 +95,8 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
         "nees_mean": nees_mean,
     }
     if isinstance(runs.real, BiasedResult):
-        record.update(_bias_record(s, runs.real, runs.truth_model, rows if full else None,
-                                   on_grid, converged, truth_biases))
+        record.update(_bias_record(s, runs.real, runs.truth_model, rows, full, on_grid,
+                                   converged, truth_biases))
     arrays = {"t_s": (grid * dt).astype(np.float64),
               "err": (err[on_grid] * f).astype(np.float32),
               "sigma": (sigma[on_grid] * np.abs(f)).astype(np.float32),
@@ -123,13 +123,15 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
     return record, arrays
 
 
-def _bias_record(s: Scenario, real, truth_model, rows, on_grid, converged,
+def _bias_record(s: Scenario, real, truth_model, rows, full: bool, on_grid, converged,
                  truth_biases: dict | None) -> dict:
     """A case's bias states at its last kept sample against the truth's, and the NEES
-    of the augmented state (the paper's nine and the biases) on the converged grid."""
+    of the augmented state (the paper's nine and the biases) on the converged grid.
+    ``rows``: the samples kept (``case_rows``); the history holds every sample when
+    ``full``, else those alone; the truth always every sample."""
     a = real.augmented
-    x, P = (a.x, a.P_packed) if rows is None else (a.x[rows], a.P_packed[rows])
-    keep = np.arange(len(truth_model)) if rows is None else rows
+    x, P = (a.x[rows], a.P_packed[rows]) if full else (a.x, a.P_packed)
+    keep = rows
     names = a.names
     final = {f"bias_{n}_deg": float(x[-1, N_STATES + j]) * RAD2DEG
              for j, n in enumerate(names)}
