@@ -136,12 +136,15 @@ def linearization(scenario: Scenario | str) -> LinearizationResult:
     return LinearizationResult(report, arrays)
 
 
-def observability(scenario: Scenario | str) -> TextReport:
-    """Section 4's rank tables (`dynprop observability`)."""
-    from dynprop.estimator.observability import format_rank_table
+def observability(scenario: Scenario | str, biases: str = "scenario") -> TextReport:
+    """Section 4's rank tables (`dynprop observability`), with the sensor-bias states the
+    scenario switches on (``biases="all"``: all four, as ``--biases all``)."""
+    from dynprop.estimator.observability import BIAS_NAMES, format_rank_table
     from dynprop.scenarios.config.build import estimator_model
-    params, _ = estimator_model(_scenario(scenario))
-    return TextReport(format_rank_table(params))
+    s = _scenario(scenario)
+    params, _ = estimator_model(s)
+    names = BIAS_NAMES if biases == "all" else s.estimator.bias_states.on()
+    return TextReport(format_rank_table(params, biases=names))
 
 
 def covariance(scenario: Scenario | str) -> TextReport:

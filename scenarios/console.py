@@ -75,7 +75,26 @@ def estimate_lines(name: str, summary: dict, step_s: float, seconds: float) -> l
                      f"for{every}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; "
                      f"{_gap_ends(summary)}; {_nees(summary['checks']['nees'])}; {eq55}")
         lines += _ekf_line(summary)
+    lines += _bias_and_gate(summary)
     lines += [f"warning: {w['message']}" for w in summary["warnings"]]
+    return lines
+
+
+def _bias_and_gate(summary: dict) -> list[str]:
+    """A line for the bias states and one for the gate, when the run had them."""
+    lines = []
+    biases = summary.get("bias_states")
+    if biases:
+        parts = []
+        for name, b in biases.items():
+            truth = "" if b["truth_deg"] is None else f" (truth {b['truth_deg']:.4f})"
+            parts.append(f"{name} {b['estimate_deg']:.4f} ± {b['sigma_deg']:.4f}{truth}")
+        lines.append("bias states, deg: " + "; ".join(parts))
+    gate = summary.get("outliers")
+    if gate:
+        r = gate["rejected"]
+        lines.append(f"outlier gate χ² > {gate['gate_chi2']:g}: rejected roll {r['roll']}, "
+                     f"yaw {r['yaw']}, h {r['h']}")
     return lines
 
 
@@ -84,6 +103,6 @@ def run_lines(name: str, summary: dict, seconds: float) -> list[str]:
     parts = [f"yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg", _gap_ends(summary),
              _real_minus_linear(summary), _nees(summary["checks"]["nees"]),
              f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg", f"{seconds:.1f} s"]
-    lines = [f"{name}: " + "; ".join(parts)] + _ekf_line(summary)
+    lines = [f"{name}: " + "; ".join(parts)] + _ekf_line(summary) + _bias_and_gate(summary)
     lines += [f"warning: {w['message']}" for w in summary["warnings"]]
     return lines
