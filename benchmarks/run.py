@@ -243,16 +243,9 @@ def main() -> None:
     # Issue 4: the filter over one day, roll and h every step, yaw two thirds of it.
     from dynprop.estimator.kalman import Measurements, dense_filter, kalman_filter
     from dynprop.estimator.transition import discretize
-    from dynprop.scenarios.config.build import estimator_model
-    params, noise = estimator_model(scenario)
+    params, noise, meas, x0, P0, rng = _filter_day()
     disc = discretize(params, noise, 0.512)
-    n = 168_750
-    rng = np.random.default_rng(3)
-    t_h = np.arange(n) * 0.512 / 3600
-    yaw = np.where(t_h < 16, rng.normal(0, 6e-4, n), np.nan)
-    meas = Measurements(rng.normal(0, 1.8e-4, n), yaw, rng.normal(0, 4e-4, n), 3.3e-8,
-                        4e-7, 1.5e-7)
-    x0, P0 = np.zeros(9), np.diag([1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12])
+    n, yaw = len(meas.roll_rad), meas.yaw_rad
     report("filter_s_per_day", median_time(lambda: kalman_filter(meas, disc, x0, P0),
                                            repeats=5), "s")
     # Issue 30: the same day with ±50 ms jitter on every tag (each step its own Φ, Γ, Q_d).

@@ -44,11 +44,15 @@ def telemetry_path(run_dir: Path, given: Path | None) -> Path:
 
 def read_run(run_dir: Path, telemetry: Path | None):
     """The run's scenario, its telemetry on the filter grid, and whether it has a truth."""
+    from ..files.telemetry_file import off_grid_message
     from ..run.estimate import estimate_inputs
     if not (run_dir / "scenario.yaml").is_file():
         raise TrimError(f"{run_dir}: not a run directory (no scenario.yaml)")
     s = load_scenario(run_dir / "scenario.yaml")
-    grid, _ = estimate_inputs(s, telemetry_path(run_dir, telemetry))
+    path = telemetry_path(run_dir, telemetry)
+    grid, _ = estimate_inputs(s, path)
+    if not grid.regular:
+        raise TrimError(off_grid_message(path, grid, s.sample_interval_s, "trim"))
     return s, grid.columns, (run_dir / "truth.csv").is_file()
 
 

@@ -78,6 +78,7 @@ def _run_telemetry(run_dir: Path) -> Path:
 def read_source(source: Path, scenario: str | Path | None = None,
                 overrides: list[str] = ()) -> TuneSource:
     """The telemetry of a run directory, or a telemetry file with its scenario."""
+    from ..files.telemetry_file import off_grid_message
     from ..run.estimate import estimate_inputs
     source = Path(source)
     if source.is_dir():
@@ -94,6 +95,8 @@ def read_source(source: Path, scenario: str | Path | None = None,
         run_dir, path = None, source
         s = load_scenario(scenario, list(overrides))
     grid, _ = estimate_inputs(s, path)
+    if not grid.regular:
+        raise TuneError(off_grid_message(path, grid, s.sample_interval_s, "tune"))
     cols = grid.columns
     params, noise = build.estimator_model(s)
     inputs = prepared_inputs(s, params, *telemetry_inputs(s, cols))
