@@ -180,3 +180,20 @@ def test_commands_that_need_the_grid_refuse_telemetry_off_it(gap_run, cadence_1s
     assert rc == 2, err
     assert len(err.strip().splitlines()) == 1 and "needs telemetry on the scenario's grid" in err
     assert not out.exists() and sorted(p.name for p in gap_run.iterdir()) == before
+
+
+def test_the_ekf_takes_each_samples_own_interval_too(gap_run, cadence_1s, tmp_path):
+    """The EKF beside the paper's filter on the 1.0 s file (each interval cut into
+    sub-steps of at most sample_interval_s): its gap-end yaw within 3σ, and its σ
+    there the paper filter's to 10% (the two filters weigh the same telemetry)."""
+    path = cadence_1s[2].parent / "one_second.csv"
+    out = tmp_path / "est"
+    rc, _, err = run_cli("estimate", str(path), "--scenario", str(gap_run / "scenario.yaml"),
+                         "--truth", str(gap_run / "truth.csv"), "--out", str(out),
+                         "--set", "estimator.filters=[paper, ekf]")
+    assert rc == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    ekf = summary["ekf"]
+    assert ekf["yaw_within_3sigma_at_gap_ends"] is True
+    ratio = ekf["yaw_sigma_at_gap_end_deg"][0] / summary["yaw_sigma_at_gap_end_deg"][0]
+    assert abs(ratio - 1) < 0.1, ratio
