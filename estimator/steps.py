@@ -112,7 +112,9 @@ def per_step(step: ca.Function) -> ca.Function:
     args = step.sx_in()
     unused = ca.SX.sym("unused")
     outs = step.call(args)
+    # Renamed: the VM's chunk function (``rollout.chunks``) calls its own parameter p.
     names = [step.name_in(i) for i in range(step.n_in())]
+    names[-1] += "_step"
     return ca.Function(f"{step.name()}_per_step", [*args, unused], outs,
                        [*names, "unused"], [step.name_out(0), step.name_out(1)])
 
