@@ -38,7 +38,8 @@ from .augmented_steps import (
 )
 from .kalman import ExtraNoise, Measurements, _extra, _inputs
 from .kalman_steps import pack_params
-from .model import H_WHEEL, N_STATES, ModelParams, R, Y, dynamics_matrix
+from .model import N_STATES, ModelParams, dynamics_matrix
+from .observability import augmented_dynamics, augmented_rows
 
 
 @dataclass(frozen=True)
@@ -320,24 +321,16 @@ def measurement_row(bias: BiasModel | None, kind: str, head: int | None = None
                     ) -> np.ndarray:
     """G row of one measurement ('roll', 'yaw' from ``head``, 'h') on the augmented
     state: e_r + e_earth_roll, e_y + e_(head's bias), e_h (a term only where the
-    state exists)."""
-    names = _names(bias)
-    G = np.zeros(N_STATES + len(names))
-    G[{"roll": R, "yaw": Y, "h": H_WHEEL}[kind]] = 1.0
-    extra = "earth_roll" if kind == "roll" else \
-        (YAW_HEADS[head] if kind == "yaw" and head is not None else None)
-    if extra in names:
-        G[N_STATES + names.index(extra)] = 1.0
-    return G
+    state exists); ``observability.augmented_rows``'s, the one definition."""
+    label = f"yaw:{YAW_HEADS[head].removesuffix('_yaw')}" if kind == "yaw" and \
+        head is not None else kind
+    return augmented_rows([label], _names(bias))[0]
 
 
 def augmented_model(p: ModelParams, bias: BiasModel | None) -> np.ndarray:
     """F_a = blockdiag(F (Eq. 11b), 0): the biases are constant between noise, for
     ``estimator.observability`` with rows from ``measurement_row``."""
-    n = N_STATES + len(_names(bias))
-    F = np.zeros((n, n))
-    F[:N_STATES, :N_STATES] = dynamics_matrix(p)
-    return F
+    return augmented_dynamics(dynamics_matrix(p), len(_names(bias)))
 
 
 def dense_augmented_filter(meas: Measurements, disc, x0, P0, u=None, *,

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .augmented_steps import BIAS_NAMES
 from .model import NCZ, STATE_NAMES, ModelParams, Y, dynamics_matrix, measurement_rows
 
 
@@ -248,7 +249,6 @@ def format_rank_table(p: ModelParams, tol: float | None = None, biases=()) -> st
 # unobservable subspace is F_a-invariant (so e^{F_a t}-invariant), hence what neither
 # span sees is the intersection, the null space of the stacked rows' matrix.
 
-BIAS_NAMES = ("earth_roll", "dss_yaw", "cass1_yaw", "cass2_yaw")
 HEADS = ("dss", "cass1", "cass2")          # yaw from head h carries bias f"{h}_yaw"
 _CLEAN = 1e-6   # entries of a scaled null vector below this are rounding (see _directions)
 
