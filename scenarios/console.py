@@ -93,8 +93,9 @@ def _bias_and_gate(summary: dict) -> list[str]:
     gate = summary.get("outliers")
     if gate:
         r = gate["rejected"]
+        heads = ", ".join(f"{k} {v}" for k, v in gate["rejected_yaw_by_head"].items())
         lines.append(f"outlier gate χ² > {gate['gate_chi2']:g}: rejected roll {r['roll']}, "
-                     f"yaw {r['yaw']}, h {r['h']}")
+                     f"yaw {r['yaw']} ({heads}), h {r['h']}")
     return lines
 
 

@@ -95,7 +95,8 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
                                whole_run_statistics(s, runs, t, present, nees_data))
     summary["filters"] = ["paper", *extra]
     summary.update(filter_section(s, design_of(s), final_biases(runs.real),
-                                  rejected_counts(runs.real), truth_biases))
+                                  rejected_counts(runs.real, written.get("sun_head")),
+                                  truth_biases))
     for name, r in extra.items():
         summary[name] = filter_summary(s, name, r, runs.truth_model, t, present)
     # summary.json before the figures, which draw its verdicts and warnings; written

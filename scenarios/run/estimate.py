@@ -140,7 +140,8 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     summary["filters"] = ["paper", *extra]
     # The truth's biases are known only from a simulated run's scenario; a real file's
     # are what the filter is for.
-    summary.update(filter_section(s, design_of(s), final_biases(real), rejected_counts(real),
+    summary.update(filter_section(s, design_of(s), final_biases(real),
+                                  rejected_counts(real, grid.columns.get("sun_head")),
                                   build.truth_biases_rad(s) if truth is not None else None))
     for name, r in extra.items():
         summary[name] = (filter_row_summary(name, r, truth_model, truth.rows, ends, t) if sparse

@@ -166,13 +166,26 @@ def bias_columns(result: FilterResult, k) -> dict[str, np.ndarray]:
 
 
 REJECTED_NAMES = ("roll", "yaw", "h")
+HEAD_NAMES = ("dss", "cass1", "cass2")   # telemetry sun_head 0, 1, 2
 
 
-def rejected_counts(result: FilterResult) -> np.ndarray | None:
-    """Samples the gate rejected, per measurement (roll, yaw, h); None without a gate."""
+def count_rejected(rejected: np.ndarray | None, sun_head) -> np.ndarray | None:
+    """The gate's rejections (N, 3) counted per sensor: roll (the Earth sensor), yaw,
+    h (the tachometers), then yaw by the Sun head that gave it (DSS, CASS1, CASS2);
+    None without a gate."""
+    if rejected is None:
+        return None
+    counts = rejected.sum(axis=0).astype(np.int64)
+    head = np.full(len(rejected), np.nan) if sun_head is None else np.asarray(sun_head, float)
+    by_head = [int(np.sum(rejected[:, 1] & (head == k))) for k in range(len(HEAD_NAMES))]
+    return np.r_[counts, by_head].astype(np.int64)
+
+
+def rejected_counts(result: FilterResult, sun_head) -> np.ndarray | None:
+    """``count_rejected`` of a filter result (None for the paper's filter)."""
     if not isinstance(result, BiasedResult):
         return None
-    return result.rejected.sum(axis=0).astype(np.int64)
+    return count_rejected(result.rejected, sun_head)
 
 
 def final_biases(result: FilterResult) -> dict[str, float] | None:
@@ -186,7 +199,7 @@ def filter_section(s: Scenario, design: FilterDesign, final: dict | None,
     """summary.json's ``bias_states`` and ``outliers`` (None when not in the design):
     each bias's final estimate and σ (``final``: the last row of estimate.csv's bias
     columns), with the truth's value and the error in σ when the run knows it; the
-    gate, and the samples it rejected per measurement (roll, yaw, h)."""
+    gate, and the samples it rejected per sensor (``count_rejected``)."""
     biases = None
     if design.bias is not None and final:
         biases = {}
@@ -200,8 +213,10 @@ def filter_section(s: Scenario, design: FilterDesign, final: dict | None,
                 "error_over_sigma": None if true_deg is None else (est - true_deg) / sig}
     outliers = None
     if design.gate_chi2 is not None:
-        counts = np.zeros(3, np.int64) if rejected is None else rejected
+        counts = np.zeros(6, np.int64) if rejected is None else rejected
         outliers = {"gate_chi2": design.gate_chi2,
-                    "rejected": {n: int(c) for n, c in zip(REJECTED_NAMES, counts,
-                                                            strict=True)}}
+                    "rejected": {n: int(c) for n, c in zip(REJECTED_NAMES, counts[:3],
+                                                            strict=True)},
+                    "rejected_yaw_by_head": {n: int(c) for n, c in zip(HEAD_NAMES, counts[3:],
+                                                                        strict=True)}}
     return {"bias_states": biases, "outliers": outliers}

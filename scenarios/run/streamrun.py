@@ -32,7 +32,7 @@ from ..units import DAY_S
 from ..workers import blas_one_thread
 from .daily import DailyTally
 from .filter_tally import FilterTally
-from .filtering import design_of, filter_section
+from .filtering import count_rejected, design_of, filter_section
 from .process import producer_process
 from .producer import producer
 from .stream import windows_of
@@ -106,7 +106,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
              for name in s.estimator.filters if name != "paper"}
     bar = Progress(n * dt / DAY_S, progress and len(plan.bounds) > 1)
     design = design_of(s)
-    last_bias, rejected = None, np.zeros(3, dtype=np.int64)
+    last_bias, rejected = None, np.zeros(6, dtype=np.int64)
     # The figures need only comparison.npz and daily.csv, so they are drawn while the
     # producer writes the last of its files; a steered run's figure also reads the
     # file the producer writes (trim_loop.csv), so that run draws after it.
@@ -146,7 +146,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
             if bias:
                 last_bias = {name: v[-1] for name, v in bias.items()}
             if w.real.rejected is not None:
-                rejected = rejected + w.real.rejected.sum(axis=0)
+                rejected = rejected + count_rejected(w.real.rejected, w.measured.sun_head)
             for name, (figs, file) in extra.items():
                 figs.add(w.filters[name], w.start, w.truth_model, closed, w.t_s)
                 file.append(estimate_columns(w.t_s[k], w.filters[name].x[k],
