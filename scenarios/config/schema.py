@@ -166,17 +166,33 @@ def leaf_paths(model: type[BaseModel], prefix: str = "") -> list[str]:
     return paths
 
 
+# Keys added after run directories and Monte Carlo sets existed, written only when
+# they differ from their defaults (``resolved_yaml``): (where, key, default).
+_LATER_KEYS = (*((("sensors", *head), key, default) for head in
+                 (("earth",), ("tachometer",), ("sun", "dss"), ("sun", "cass1"), ("sun", "cass2"))
+                 for key, default in (("outlier_rate", 0.0), ("outlier_size", 20.0))),
+               (("estimator",), "outlier_gate_chi2", None))
+
+
 def resolved_yaml(scenario: Scenario) -> str:
     """Every key with its value, defaults filled, stamped with this version; loads
-    back to the same scenario.  The exceptions: ``environment.disturbance`` and
-    ``telemetry`` are written only when they differ from their defaults, so that a
-    scenario without them resolves to the very text it did before the sections
-    existed (its run directories, and the digest that resumes a Monte Carlo set,
-    unchanged)."""
+    back to the same scenario.  The exceptions: ``environment.disturbance``,
+    ``telemetry``, ``estimator.bias_states`` and the outlier keys (``_LATER_KEYS``)
+    are written only when they differ from their defaults, so that a scenario without
+    them resolves to the very text it did before they existed (its run directories,
+    and the digest that resumes a Monte Carlo set, unchanged)."""
     data = scenario.model_dump(mode="json")
     if scenario.environment.disturbance == Disturbance():
         del data["environment"]["disturbance"]
     if scenario.telemetry == Telemetry():
         del data["telemetry"]
+    if scenario.estimator.bias_states == type(scenario.estimator.bias_states)():
+        del data["estimator"]["bias_states"]
+    for where, key, default in _LATER_KEYS:
+        node = data
+        for part in where:
+            node = node[part]
+        if node.get(key, default) == default:
+            node.pop(key, None)
     data["dynprop_version"] = __version__
     return yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=100)

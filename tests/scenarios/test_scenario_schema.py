@@ -434,6 +434,23 @@ def test_resolved_yaml_loads_back_to_the_same_scenario(tmp_path, name):
     assert resolved_yaml(again) == text  # a fixed point
 
 
+def test_keys_added_later_are_written_only_when_set(tmp_path):
+    """The bias states, the gate and the outlier keys stay out of a scenario that does
+    not set them (its scenario.yaml and Monte Carlo digest as before they existed),
+    and round-trip when set."""
+    plain = resolved_yaml(load_scenario("goes_next_equinox"))
+    assert "bias_states" not in plain and "outlier" not in plain
+    s = load_scenario("goes_next_equinox", [
+        "estimator.bias_states.dss_yaw.model=constant", "estimator.outlier_gate_chi2=25",
+        "sensors.sun.cass1.outlier_rate=0.01", "sensors.tachometer.outlier_size=30"])
+    text = resolved_yaml(s)
+    assert "bias_states" in text and "outlier_gate_chi2: 25" in text
+    again = _reload(text, tmp_path)
+    assert again.model_copy(update={"dynprop_version": None}) == s
+    assert again.sensors.sun.cass1.outlier_rate == 0.01
+    assert again.sensors.tachometer.outlier_size == 30
+
+
 def test_resolved_yaml_is_stamped_with_the_package_version(tmp_path):
     from scenarios import __version__
     text = resolved_yaml(load_scenario("goes_next_equinox"))
