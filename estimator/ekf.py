@@ -190,11 +190,17 @@ def ekf_filter(inputs: EkfInputs, params: np.ndarray, omega_n_radps: float,
     last, aux = engine.run_kept(s0, ins, p, rows)
     if rows is not None:
         present = present[rows]
+    return _result(last, aux, present, engine.backend, keep_nominal)
+
+
+def _result(last, aux, present, backend: str, keep_nominal: bool) -> EkfResult:
+    """The EKF's history from its rollout's final state and kept aux rows (ν and S
+    blanked where a measurement was absent)."""
     o = 9 + N_UT
     nu, S = aux[:, o:o + m.NZ].copy(), aux[:, o + m.NZ:o + 2 * m.NZ].copy()
     nu[~present], S[~present] = np.nan, np.nan
     return EkfResult(aux[:, :9], aux[:, 9:o], nu, S, last[:m.NX], unpack_e(last[m.NX:]),
-                     engine.backend, aux[:, o + 2 * m.NZ:] if keep_nominal else None)
+                     backend, aux[:, o + 2 * m.NZ:] if keep_nominal else None)
 
 
 
@@ -236,12 +242,7 @@ def _ekf_per_step(inputs: EkfInputs, params, omega_n_radps, X0, P0, backend, chu
     engine = _engine_per_step(chunk, backend, iterations)
     last, _, aux = roll_blocks(engine, s0, ins, len(src), params_of, np.arange(0), keep,
                                np.arange(engine.n_aux))
-    present = present[keep]
-    o = 9 + N_UT
-    nu, S = aux[:, o:o + m.NZ].copy(), aux[:, o + m.NZ:o + 2 * m.NZ].copy()
-    nu[~present], S[~present] = np.nan, np.nan
-    return EkfResult(aux[:, :9], aux[:, 9:o], nu, S, last[:m.NX], unpack_e(last[m.NX:]),
-                     engine.backend, aux[:, o + 2 * m.NZ:] if keep_nominal else None)
+    return _result(last, aux, present[keep], engine.backend, keep_nominal)
 
 
 @lru_cache(maxsize=4)

@@ -41,6 +41,8 @@ def gap_ends(records: list[dict]) -> dict:
     """Every Sun-gap end of every case: yaw error, σ, and their ratio's statistics."""
     err = np.array([e for r in records for e in r["yaw_error_at_gap_end_deg"]])
     sig = np.array([s for r in records for s in r["yaw_sigma_at_gap_end_deg"]])
+    if not err.size:   # no verdict from no gap end
+        return {"gap_ends": 0, "not_tested": "no Sun-gap end in any case"}
     z = err / sig
     return {"gap_ends": int(len(err)), "yaw_error_rms_deg": float(np.sqrt(np.mean(err**2))),
             "yaw_sigma_mean_deg": float(np.mean(sig)),
@@ -55,7 +57,11 @@ def biases(records: list[dict]) -> dict:
     names = sorted({n for r in records for n in (r.get("bias_states") or {})})
     out = {}
     for name in names:
-        rows = [r["bias_states"][name] for r in records if r.get("bias_states")]
+        rows = [r["bias_states"][name] for r in records if r.get("bias_states")
+                and r["bias_states"][name]["truth_deg"] is not None]
+        if not rows:
+            out[name] = {"cases": 0, "not_tested": "no case knows the truth's bias"}
+            continue
         z = np.array([b["error_over_sigma"] for b in rows])
         out[name] = {"cases": len(rows),
                      "error_over_sigma_rms": float(np.sqrt(np.mean(z**2))),

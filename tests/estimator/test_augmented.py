@@ -36,7 +36,6 @@ from estimator.model import (
     N_STATES,
     NCX,
     NCZ,
-    ModelParams,
     ProcessNoise,
     R,
     Y,
@@ -46,12 +45,10 @@ from estimator.observability import rank_progression, unobservable_subspace
 from estimator.transition import discretize
 
 from .cov_helpers import cov_dev
+from .test_kalman import DT, NOISE, PARAMS
 
-DT = 0.512
-H = -0.1082 * 2 * 5485 * 2 * np.pi / 60 * np.cos(np.deg2rad(1.656))
-PARAMS = ModelParams(3364.376, 954.936, 3461.393, H, np.sqrt(3.986004418e14 / 42164170.0**3))
-NOISE = ProcessNoise(q_x=5.4e-7, q_z=5.4e-7, q_w=5e-10, q_px=3e-18, q_pz=3e-18, q_cx=3e-18,
-                     q_cz=3e-18)
+H = PARAMS.H_Nms
+
 DISC = discretize(PARAMS, NOISE, DT)
 R3 = np.array([roll_variance(), yaw_variance(), h_variance()])   # Eqs. 46–47
 P0 = np.diag([1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-12, 1e-12, 1e-12, 1e-12])

@@ -45,3 +45,15 @@ def test_the_study_reduces_gap_ends_biases_and_the_ensemble_nees(tmp_path):
     # The mean of 2 draws of χ²(11) is χ²(22)/2.
     assert nees["bounds_95"] == pytest.approx(list(chi2.ppf([0.025, 0.975], 22) / 2))
     assert nees["verdict"] == "not rejected"
+
+
+def test_no_gap_end_is_not_tested(tmp_path):
+    a = _set(tmp_path / "a", [_case([], [])])
+    b = _set(tmp_path / "b", [_case([], [], {"dss_yaw": {"estimate_deg": 0.0, "truth_deg": None,
+                                                       "sigma_deg": 0.01,
+                                                       "error_over_sigma": None}}, None)])
+    out = compare(a, b)
+    assert out["without_bias_states"]["gap_ends"] == 0
+    assert "not_tested" in out["without_bias_states"]
+    assert out["with_bias_states"]["biases"]["dss_yaw"]["cases"] == 0
+    assert out["with_bias_states"]["nees_augmented"] is None
