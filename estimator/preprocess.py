@@ -241,3 +241,23 @@ def prepare_at_times(params: ModelParams, t_s, roll_rad, yaw_rad, wheel_speeds_r
     nw = wheel_torque_at(t, meas.h_Nms, nw_window_s)
     u = input_vector(params, Nx_model_Nm, Nz_model_Nm, nw) * np.ones((len(t), 1))
     return FilterInputs(meas, u, dropout_wheel_noise_at(t, meas.h_Nms, float(meas.var_h)))
+
+
+def earth_pitch(pitch_rad, dt_s: float, window_s: float = 20.0) -> np.ndarray:
+    """The Earth sensor's pitch and pitch rate (N, 2), smoothed by the quadratic
+    Savitzky–Golay fit ``wheel_torque`` uses: the nonlinear batch's pitch, which it
+    takes from the sensor rather than propagating (``batch_steps``).  Missing samples
+    are bridged by a straight line."""
+    p = np.asarray(pitch_rad, dtype=float)
+    ok = np.isfinite(p)
+    if not ok.any():
+        raise ValueError("no Earth-sensor pitch")
+    if not ok.all():
+        k = np.arange(len(p))
+        p = np.interp(k, k[ok], p[ok])
+    n = len(p)
+    window = min(int(round(window_s / dt_s)) | 1, n if n % 2 else n - 1)
+    if window < 3:
+        return np.column_stack([p, np.zeros(n)])
+    return np.column_stack([savgol_derivative(p, window, 2, dt_s, deriv=0),
+                            savgol_derivative(p, window, 2, dt_s, deriv=1)])

@@ -198,6 +198,28 @@ def build_parser() -> argparse.ArgumentParser:
     _out_args(tune, "output directory (default: RUN_DIR/tune, or tune/ beside the file)",
               required=False, force="replace a non-empty --out (RUN_DIR/tune is replaced "
               "anyway)")
+    batch = sub.add_parser("batch", help="batch least squares over spans of the telemetry, "
+                           "the paper's alternative to its filter, beside the filter and the "
+                           "smoother: estimate_batch.csv, batch.json, batch.png (RUN_DIR/batch/)")
+    batch.add_argument("source", type=Path, metavar="RUN_DIR|TELEMETRY.csv",
+                       help="a `dynprop run` or `estimate` directory, or a telemetry file "
+                       "(with --scenario)")
+    batch.add_argument("--scenario", help="scenario (default: the run directory's "
+                       "scenario.yaml)")
+    batch.add_argument("--truth", type=Path, metavar="TRUTH.csv", help="the truth to judge "
+                       "the estimates against (default: the run directory's truth.csv)")
+    batch.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                       help="override a scenario key (repeatable); VALUE is YAML")
+    batch.add_argument("--span-h", type=float, metavar="H", help="length of each batch "
+                       "(default: batch.span_h, 24 h)")
+    batch.add_argument("--overlap-h", type=float, metavar="H", help="how far each batch "
+                       "reaches into the previous one's span (default: batch.overlap_h, 0)")
+    batch.add_argument("--model", choices=("linear", "nonlinear"), help="the paper's linear "
+                       "model (one least-squares solve) or the full gyrostat (Gauss–Newton); "
+                       "default: batch.model, nonlinear")
+    _out_args(batch, "output directory (default: RUN_DIR/batch, or batch/ beside the file)",
+              required=False, force="replace a non-empty --out (RUN_DIR/batch is replaced "
+              "anyway)")
     plot = sub.add_parser("plot", help="(re)draw the figures of a run or Monte Carlo directory")
     plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser

@@ -7,6 +7,7 @@ key, column or argument; no traceback, no directory written), 1 for an internal 
 
 from __future__ import annotations
 
+import math
 import os
 import shlex
 import sys
@@ -196,6 +197,26 @@ def _cmd_trim(args) -> int:
     return 0
 
 
+def _cmd_batch(args) -> int:
+    from .batch.report import one_line, run_batch
+    for name in ("span_h", "overlap_h"):
+        v = getattr(args, name)
+        if v is not None and not (math.isfinite(v) and v >= 0 and (v > 0 or name == "overlap_h")):
+            raise InputError(f"--{name.replace('_', '-')}: {v:g} must be a positive number of "
+                             "hours" + (" or 0" if name == "overlap_h" else ""))
+    start = time.perf_counter()
+    d, out = run_batch(args.source, args.scenario, args.set, args.truth, args.out, args.model,
+                       args.span_h, args.overlap_h, force=args.force or args.out is None,
+                       command=shlex.join(["dynprop", *sys.argv[1:]]))
+    print(one_line(d))
+    for line in d["warnings"]:
+        print(f"warning: {line}")
+    print(f"{time.perf_counter() - start:.1f} s; wrote {out}/: estimate_batch.csv, "
+          "batch.json, batch.png")
+    # A batch that did not converge is reported, and the command says so in its status.
+    return 0 if d["converged"] else 1
+
+
 def _cmd_tune(args) -> int:
     from .tune.fit import TuneOptions
     from .tune.report import one_line, run_tune
@@ -303,7 +324,8 @@ COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd
             "run": _cmd_run, "estimate": _cmd_estimate,
             "observability": _cmd_observability, "covariance": _cmd_covariance,
             "linearization": _cmd_linearization, "montecarlo": _cmd_montecarlo,
-            "trim": _cmd_trim, "tune": _cmd_tune}
+            "trim": _cmd_trim, "tune": _cmd_tune,
+            "batch": _cmd_batch}
 
 
 def os_error_line(exc: OSError, args) -> str:
@@ -330,6 +352,8 @@ def os_error_line(exc: OSError, args) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    from dynprop.estimator.batch import BatchError
+
     from .config.loader import ScenarioError
     from .files.rundir import RunDirError
     from .montecarlo import SchedulerError
@@ -338,7 +362,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return COMMANDS[args.command](args)
     except (InputError, RunDirError, ScenarioError, SchedulerError, TrimError,
-            TuneError) as exc:
+            TuneError, BatchError) as exc:
         # One line per problem, each naming its key path, column or argument.
         for line in str(exc).splitlines() or [""]:
             print(f"dynprop: error: {line}", file=sys.stderr)

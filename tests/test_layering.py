@@ -39,7 +39,7 @@ RANKS = {
     "files": 2, "bridge": 2,
     "figures": 3,
     "run": 4,
-    "trim": 5, "linearization": 5, "montecarlo": 5, "tune": 5,
+    "trim": 5, "linearization": 5, "montecarlo": 5, "tune": 5, "batch": 5,
     "studies": 6,
     "commands": 7, "arguments": 7, "console": 7,
     "cli": 8,

@@ -18,6 +18,7 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 
 from .. import __version__
 from ..units import DAY_S
+from .batch import Batch
 from .estimation import DEFAULT_OUTPUT_INTERVAL_S, TELEMETRY_AUTO_MAX_S, Estimator, Output, Trim
 from .montecarlo import MonteCarlo, check_dispersion
 from .sections import (
@@ -86,6 +87,7 @@ class Scenario(_Section):
     output: Output = Field(default_factory=Output)
     trim: Trim = Field(default_factory=Trim)
     telemetry: Telemetry = Field(default_factory=Telemetry)
+    batch: Batch = Field(default_factory=Batch)
 
     @field_validator("dynprop_version", mode="before")
     @classmethod
@@ -130,6 +132,9 @@ class Scenario(_Section):
         if every is not None and every * DAY_S >= self.duration_s:
             problems.append(f"trim.every_days: {every} days is not shorter than the run "
                             f"({self.duration_s / DAY_S:g} days): the tab would never move")
+        if self.batch.overlap_h >= self.batch.span_h:
+            problems.append(f"batch.overlap_h: {self.batch.overlap_h:g} h must be shorter than "
+                            f"batch.span_h ({self.batch.span_h:g} h)")
         for key, d in self.montecarlo.dispersions.items():
             try:
                 check_dispersion(key, leaf_value(self, key), d)
@@ -177,7 +182,7 @@ _LATER_KEYS = (*((("sensors", *head), key, default) for head in
 def resolved_yaml(scenario: Scenario) -> str:
     """Every key with its value, defaults filled, stamped with this version; loads
     back to the same scenario.  The exceptions: ``environment.disturbance``,
-    ``telemetry``, ``estimator.bias_states`` and the outlier keys (``_LATER_KEYS``)
+    ``telemetry``, ``batch``, ``estimator.bias_states`` and the outlier keys (``_LATER_KEYS``)
     are written only when they differ from their defaults, so that a scenario without
     them resolves to the very text it did before they existed (its run directories,
     and the digest that resumes a Monte Carlo set, unchanged)."""
@@ -186,6 +191,8 @@ def resolved_yaml(scenario: Scenario) -> str:
         del data["environment"]["disturbance"]
     if scenario.telemetry == Telemetry():
         del data["telemetry"]
+    if scenario.batch == Batch():
+        del data["batch"]
     if scenario.estimator.bias_states == type(scenario.estimator.bias_states)():
         del data["estimator"]["bias_states"]
     for where, key, default in _LATER_KEYS:

@@ -59,15 +59,15 @@ OWN_FIGURES = frozenset((
     "telemetry_overview.png", "season.png", "trim_loop.png", "truth.png", "telemetry.png",
     "mc_errors.png", "mc_nees.png", "mc_gap_yaw.png", "coefficients.png",
     "divergence_time.png", "divergence_sweep.png", "budget.png", "estimation.png",
-    "trim.png", "tune.png"))
+    "trim.png", "tune.png", "batch.png"))
 OWN_FILES = frozenset((
     "scenario.yaml", "case_scenario.yaml", "summary.json", "truth.csv", "telemetry.csv",
     "estimate.csv", "smoothed.csv", "daily.csv", "comparison.npz", "trim_loop.csv",
     "montecarlo.json", "montecarlo.npz", "montecarlo_case.json", "montecarlo_case.npz",
     "report.json", "report.md", "tune.json", "tune.md", "tuned_noise.yaml", "trim.json",
-    "trim.md")) | OWN_FIGURES
+    "trim.md", "batch.json")) | OWN_FIGURES
 _OWN_PATTERN = re.compile(r"^(estimate_[a-z0-9_]+\.csv|case-\d+\.(json|npz|full\.npz))$")
-OWN_DIRS = frozenset(("plots", "cases", "trim", "tune", "verify"))
+OWN_DIRS = frozenset(("plots", "cases", "trim", "tune", "verify", "batch"))
 # Temporaries of a write killed half way: ``.NAME.XXXXXXXX`` (montecarlo.store's
 # atomic_write) and ``.NAME.tmp`` (figures.save_figure).
 _TEMPORARY = re.compile(r"^\.(?P<name>.+)\.(tmp|[A-Za-z0-9_]{8})$")
