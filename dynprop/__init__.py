@@ -17,14 +17,14 @@ from dynprop.scenarios import __version__
 # `dynprop.<package>` import, the command line's included, runs this file first,
 # and the facade's tables (pandas) and statistics would cost the CLI half a
 # second of start-up it never uses.
-_API = ("ScenarioError", "covariance", "linearization", "load_scenario", "montecarlo",
+_API = ("ScenarioError", "batch", "covariance", "linearization", "load_scenario", "montecarlo",
         "observability", "open_run", "run", "simulate", "tune")
-_RESULTS = ("LinearizationResult", "MonteCarloResult", "RunResult", "SimulationResult",
-            "TextReport", "TuneResult")
+_RESULTS = ("BatchResult", "LinearizationResult", "MonteCarloResult", "RunResult",
+            "SimulationResult", "TextReport", "TuneResult")
 
 __all__ = [  # noqa: F822 - defined by __getattr__ below
-    "LinearizationResult", "MonteCarloResult", "RunResult", "ScenarioError",
-    "SimulationResult", "TextReport", "TuneResult", "__version__", "covariance",
+    "BatchResult", "LinearizationResult", "MonteCarloResult", "RunResult", "ScenarioError",
+    "SimulationResult", "TextReport", "TuneResult", "__version__", "batch", "covariance",
     "linearization", "load_scenario", "montecarlo", "observability", "open_run", "run",
     "simulate", "tune",
 ]

@@ -15,6 +15,7 @@ from dynprop.scenarios.config.loader import ScenarioError
 from dynprop.scenarios.config.schema import Scenario
 
 from .results import (
+    BatchResult,
     LinearizationResult,
     MonteCarloResult,
     RunResult,
@@ -23,7 +24,7 @@ from .results import (
     TuneResult,
 )
 
-__all__ = ["ScenarioError", "covariance", "linearization", "load_scenario", "montecarlo",
+__all__ = ["ScenarioError", "batch", "covariance", "linearization", "load_scenario", "montecarlo",
            "observability", "open_run", "run", "simulate", "tune"]
 
 
@@ -180,3 +181,28 @@ def tune(source, scenario: Scenario | str | None = None, params=None, tie_xz: bo
             scenario = owner / "scenario.yaml"
         run_tune(Path(path), scenario, [], out, options, force=False)
     return TuneResult(out, owner)
+
+
+def batch(source, scenario: Scenario | str | None = None, truth=None, model: str | None = None,
+          span_h: float | None = None, overlap_h: float | None = None,
+          set: dict | None = None) -> BatchResult:
+    """Batch least squares over spans of the telemetry (`dynprop batch`), beside the
+    filter and the smoother: ``source`` a run (``RunResult`` or its directory, with its
+    truth.csv) or a telemetry file with its ``scenario`` (and ``truth``)::
+
+        b = dynprop.batch(r, model="nonlinear", span_h=24)   # r = dynprop.run(s)
+        b.batches[0]["state"], b.summary["truth"]["batch"]["gap_ends"]
+        b.estimate[["yaw_deg", "sigma_yaw_deg"]].plot(); b.save("runs/eq/batch")
+
+    A batch that did not converge is in ``b.summary["not_converged"]`` and its rows of
+    ``b.estimate`` are NaN."""
+    from dynprop.scenarios.batch.report import run_batch
+    path = getattr(source, "path", source)
+    overrides = [f"{k}={json.dumps(v)}" for k, v in (set or {}).items()]
+    with _temporary("batch") as (owner, out):
+        if scenario is not None and not isinstance(scenario, str | Path):
+            (owner / "scenario.yaml").write_text(str(scenario))
+            scenario = owner / "scenario.yaml"
+        run_batch(Path(path), scenario, overrides, None if truth is None else Path(truth),
+                  out, model, span_h, overlap_h, force=False)
+    return BatchResult(out, owner)

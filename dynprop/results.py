@@ -212,3 +212,32 @@ class TuneResult(_Directory):
         ax.imshow(img)
         ax.axis("off")
         return fig
+
+
+class BatchResult(_Directory):
+    """`dynprop batch`: ``summary`` (batch.json's dict), ``batches`` (one dict per batch:
+    epoch, converged, iterations, cost, residuals, state, σ and consider σ),
+    ``estimate`` (estimate_batch.csv as a DataFrame indexed by t_s), ``figure()``
+    (batch.png) and ``save(dir)``."""
+
+    @property
+    def summary(self) -> dict:
+        return json.loads((self.path / "batch.json").read_text())
+
+    @property
+    def batches(self) -> list[dict]:
+        return self.summary["batches"]
+
+    @property
+    def estimate(self) -> pd.DataFrame:
+        return _table(self.path / "estimate_batch.csv")
+
+    def figure(self):
+        """batch.png as a matplotlib Figure (an image of the saved file)."""
+        import matplotlib.image as mpimg
+        import matplotlib.pyplot as plt
+        img = mpimg.imread(self.path / "batch.png")
+        fig, ax = plt.subplots(figsize=(img.shape[1] / 100, img.shape[0] / 100))
+        ax.imshow(img)
+        ax.axis("off")
+        return fig

@@ -41,6 +41,13 @@ from .steps import per_step, roll_blocks
 
 MU_MAX = 1e8
 MU_START = 1e-4
+FULL_PASS_BELOW = 3.0   # σ: after a Gauss–Newton step this small the next is likely the last
+
+
+def _xx(p) -> tuple[np.ndarray, np.ndarray]:
+    """The solve-for block of a pass's normal equations (without the consider
+    parameters' rows and columns)."""
+    return p.Lam[:N_STATES, :N_STATES], p.b[:N_STATES]
 
 
 @dataclass(frozen=True)
@@ -174,8 +181,14 @@ def nonlinear_batch(data: NonlinearData, prior: Prior | None, x_start: np.ndarra
     x = np.asarray(x_start, dtype=float).copy()
     if prior is not None:
         x[list(fixed)] = prior.x[list(fixed)]
+    n_c = 0 if consider_sigma is None else bs.N_C
+    rows = np.asarray(rows, dtype=np.int64)
+
+    def full_pass(at):
+        return run_pass(data, at, n_c, with_paper=True, rows=rows)
+
     cur = run_pass(data, x)
-    N, g, prior_cost = with_prior(cur.Lam, cur.b, x, prior, fixed)
+    N, g, prior_cost = with_prior(*_xx(cur), x, prior, fixed)
     J = cur.cost + prior_cost
     costs, mu, passes, converged, message = [J], MU_START, 1, False, ""
     while True:
@@ -191,9 +204,13 @@ def nonlinear_batch(data: NonlinearData, prior: Prior | None, x_start: np.ndarra
         delta, _ = solve_normal(N, g, fixed, damping=mu)
         trial_x = x + delta
         try:
-            trial = run_pass(data, trial_x)
+            # Near the solution the next pass is likely the last: make it the one that
+            # also carries the consider and paper-coordinate sensitivities, so that
+            # converging costs no separate final pass.
+            trial = (full_pass if decrement < FULL_PASS_BELOW else
+                     lambda at: run_pass(data, at))(trial_x)
             passes += 1
-            tN, tg, tprior = with_prior(trial.Lam, trial.b, trial_x, prior, fixed)
+            tN, tg, tprior = with_prior(*_xx(trial), trial_x, prior, fixed)
             tJ = trial.cost + tprior
         except FloatingPointError:
             passes += 1
@@ -210,9 +227,7 @@ def nonlinear_batch(data: NonlinearData, prior: Prior | None, x_start: np.ndarra
                 break
     _, Ninv = solve_normal(N, g, fixed)
     P0 = covariance(Ninv, prior, fixed)
-    n_c = 0 if consider_sigma is None else bs.N_C
-    rows = np.asarray(rows, dtype=np.int64)
-    final = run_pass(data, x, n_c, with_paper=True, rows=rows)
+    final = cur if cur.x is not None else full_pass(x)
     T = final.T
     Tx = T[:, :, :N_STATES]
     P_rows = np.einsum("kia,ab,kjb->kij", Tx, np.nan_to_num(P0), Tx)
