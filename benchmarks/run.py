@@ -206,13 +206,49 @@ def ekf_over_filter() -> float:
     return statistics.median(te) / statistics.median(tf)
 
 
+def batch_figures() -> list[tuple[str, float, str]]:
+    """Issue 31: the nonlinear batch over 24 h of simulated goes_next_equinox telemetry
+    (the linear solve it starts from, the Gauss–Newton passes and the consider pass,
+    ``batch.spans.solve_spans`` as `dynprop batch` runs it, without the files), and
+    ``batch_over_filter``: that over one pass of the paper's filter on the same
+    telemetry, the two timed in turn, 5 times (target ≤ 30, moonshot ≤ 8); also the
+    linear batch."""
+    from dynprop.estimator.kalman import kalman_filter
+    from dynprop.estimator.transition import discretize
+    from dynprop.scenarios.batch.spans import solve_spans
+    from dynprop.scenarios.bridge.inputs import filter_inputs, initial_prior, measured
+    from dynprop.scenarios.config.build import estimator_model
+    s = load_scenario("goes_next_equinox", ["duration_s=86400"])
+    sim = simulate(s)
+    tel = measured(sim.telemetry)
+    params, noise = estimator_model(s)
+    disc = discretize(params, noise, s.sample_interval_s)
+    meas, u, _ = filter_inputs(s, params, *tel)
+    x0, P0 = initial_prior(s, params)
+    rows = np.arange(0, len(u), 125)
+
+    def batch(model):
+        return solve_spans(s, tel, sim.telemetry.pitch_rad, rows, model=model, span_h=24.0)
+
+    run = batch("nonlinear")
+    assert all(sol.converged for sol in run.solutions)
+    kalman_filter(meas, disc, x0, P0, u)
+    tb, tf = [], []
+    for _ in range(5):
+        tb.append(median_time(lambda: batch("nonlinear"), 1, 0))
+        tf.append(median_time(lambda: kalman_filter(meas, disc, x0, P0, u), 1, 0))
+    b = statistics.median(tb)
+    return [("batch_24h_s", b, "s"), ("batch_over_filter", b / statistics.median(tf), "x"),
+            ("batch_linear_24h_s", median_time(lambda: batch("linear"), 3), "s")]
+
+
 def main() -> None:
     only = sys.argv[1:]
     if only:
         # `python benchmarks/run.py discretize_ms run_figures_2day_s`: just those.
         for name in only:
-            if name == "tune_figures":
-                for key, value, unit in tune_figures():
+            if name in ("tune_figures", "batch_figures"):
+                for key, value, unit in globals()[name]():
                     report(key, value, unit)
                 continue
             if name == "run_365day":
@@ -269,6 +305,8 @@ def main() -> None:
             report(key, value, unit)
     report("run_figures_2day_s", run_figures_2day_s(), "s")
     for key, value, unit in tune_figures():
+        report(key, value, unit)
+    for key, value, unit in batch_figures():
         report(key, value, unit)
     k = 5000  # the plain-numpy loop, for comparison, scaled to a day
     part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,

@@ -1,8 +1,8 @@
 """docs/outputs.md names every column and key the commands write.
 
-Each CSV column, each summary.json key (at any depth), each comparison.npz key and
-each Monte Carlo case-record key written by a short `simulate`, `run`, `run
---montecarlo-case` and `estimate` must appear in the document as a `code` span,
+Each CSV column, each summary.json and batch.json key (at any depth), each
+comparison.npz key and each Monte Carlo case-record key written by a short
+`simulate`, `run`, `run --montecarlo-case`, `estimate` and `batch` must appear in the document as a `code` span,
 literally or through a placeholder (`wheel<i>_rpm`, `<head>_alpha_deg`,
 `<source>_x_Nm` with the source itself named, `sigma_<state column>`)."""
 
@@ -50,6 +50,8 @@ def undocumented(names, spans: set[str]) -> list[str]:
             continue
         if name.startswith("sigma_") and name[6:] in spans:
             continue
+        if name.startswith("sigma_consider_") and name[15:] in spans:
+            continue  # `dynprop batch`'s σ with the consider parameters
         if name.endswith("_Nm") and name[:-5] in spans and name[-4] in "xyz":
             continue  # <source>_<axis>_Nm with the source named
         if not any(p.match(name) for p in pats):
@@ -100,6 +102,9 @@ def written(tmp_path_factory) -> dict[str, Path]:
                          str(dirs["run_full"] / "truth.csv"), "--out", str(base / "estimate"))
     assert rc == 0, err
     dirs["estimate"] = base / "estimate"
+    rc, _, err = run_cli("batch", str(dirs["run_full"]), "--out", str(base / "batch"))
+    assert rc == 0, err
+    dirs["batch"] = base / "batch"
     return dirs
 
 
@@ -113,7 +118,7 @@ def test_every_csv_column_is_documented(written):
 def test_every_summary_and_case_key_is_documented(written):
     spans = _spans()
     for d in written.values():
-        for name in ("summary.json", "montecarlo_case.json"):
+        for name in ("summary.json", "montecarlo_case.json", "batch.json"):
             if (d / name).is_file():
                 keys = json_keys(json.loads((d / name).read_text()))
                 assert not undocumented(sorted(keys), spans), f"{d.name}/{name}"
