@@ -221,6 +221,16 @@ def residual_stats(e: np.ndarray, z: np.ndarray, r: np.ndarray
     return rms, norm
 
 
+def linear_start(data: LinearData, prior: Prior | None) -> np.ndarray:
+    """The linear batch's x̂_0 alone (no propagation, no consider parameters): the
+    nonlinear batch's starting point."""
+    fixed = fixed_states(int(measurement_counts(data.meas.z())[1]))
+    if prior is None and fixed:
+        raise BatchError("no yaw measurement in the span: the constant yaw torque N_cz is "
+                         "unobservable (Section 4) and there is no a priori to hold it")
+    return _solve_linear(data, prior, fixed)[0]
+
+
 def _solve_linear(data: LinearData, prior: Prior | None, fixed) -> tuple:
     Lam, b, c = linear_normal(data)
     x_ref = np.zeros(N_STATES) if prior is None else prior.x.copy()

@@ -19,7 +19,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator.batch import BatchError, BatchSolution, LinearData, Prior, linear_batch
+from dynprop.estimator.batch import (
+    BatchError,
+    BatchSolution,
+    LinearData,
+    Prior,
+    linear_batch,
+    linear_start,
+)
 from dynprop.estimator.batch_nonlinear import NonlinearData, Options, nonlinear_batch
 from dynprop.estimator.kalman import Measurements
 from dynprop.estimator.model import N_STATES
@@ -162,10 +169,11 @@ def solve_spans(s: Scenario, tel: Measured, pitch_rad, rows=(), t_s=None,
         ld = _cut_linear(lin, sp)
         cut_cases = tuple(type(c)(c.name, c.sigma, c.delta, _cut_linear(c.plus, sp),
                                   _cut_linear(c.minus, sp)) for c in cases)
-        sol = linear_batch(ld, prior, want, cut_cases if model == "linear" else ())
-        if model == "nonlinear":
-            sol = nonlinear_batch(_cut_nonlinear(nl, sp), prior, sol.x0, want, sigma_c,
-                                  options)
+        if model == "linear":
+            sol = linear_batch(ld, prior, want, cut_cases)
+        else:   # from the linear batch's solution
+            sol = nonlinear_batch(_cut_nonlinear(nl, sp), prior, linear_start(ld, prior),
+                                  want, sigma_c, options)
         solutions.append(sol)
         priors.append(source)
         hist = slice(sp.a, sp.stop)
