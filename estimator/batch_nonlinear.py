@@ -226,7 +226,7 @@ def nonlinear_batch(data: NonlinearData, prior: Prior | None, x_start: np.ndarra
                            f"damping above {MU_MAX:g}) after {passes} iterations")
                 break
     _, Ninv = solve_normal(N, g, fixed)
-    P0 = covariance(Ninv, prior, fixed)
+    P0 = covariance(N, Ninv, prior, fixed)
     final = cur if cur.x is not None else full_pass(x)
     T = final.T
     Tx = T[:, :, :N_STATES]

@@ -78,8 +78,12 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
     """Everything `dynprop batch` does; returns batch.json's dictionary and the
     directory written (default: RUN_DIR/batch, or batch/ beside the file)."""
     from ..figures.batch import batch_figure
-    from ..files.rundir import staged_run_dir
+    from ..files.rundir import check_out_dir, staged_run_dir
     src = read_source(Path(source), scenario, overrides, truth)
+    out = Path(out) if out is not None else (src.run_dir or src.telemetry.parent) / "batch"
+    # An unusable --out is refused before the batches are solved, as `run` and
+    # `estimate` refuse it (staged_run_dir checks it again when writing).
+    check_out_dir(out, force)
     s, grid = src.scenario, src.grid
     model = model or s.batch.model
     span_h = s.batch.span_h if span_h is None else span_h
@@ -134,7 +138,6 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
                              {name: (x[at], sigmas[name][at]) for name, x in estimates.items()},
                              gaps, sig_c[at])
         errors = {name: (x[at] - tm)[:, [2, 0]] * RAD2DEG for name, x in estimates.items()}
-    out = Path(out) if out is not None else (src.run_dir or src.telemetry.parent) / "batch"
     columns = estimate_columns(t[k], run.x[k], sig_b[at_k], wn)
     consider = estimate_columns(t[k], run.x[k], sig_c[at_k], wn)
     columns |= {name.replace("sigma_", "sigma_consider_"): consider[name]

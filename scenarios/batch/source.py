@@ -29,6 +29,8 @@ def read_source(source: Path, scenario: str | Path | None = None, overrides=(),
     samples; a run directory's truth.csv is used unless ``truth`` names another."""
     from ..run.estimate import estimate_inputs
     source = Path(source)
+    if not source.exists():
+        raise RunDirError(f"{source}: no such telemetry file or run directory")
     if source.is_dir():
         if not (source / "scenario.yaml").is_file():
             raise RunDirError(f"{source}: not a run directory (no scenario.yaml)")
@@ -45,8 +47,6 @@ def read_source(source: Path, scenario: str | Path | None = None, overrides=(),
         if scenario is None:
             raise RunDirError(f"{source}: a telemetry file needs --scenario (the spacecraft "
                               "and sensors it came from)")
-        if not source.is_file():
-            raise RunDirError(f"{source}: no such telemetry file or run directory")
         path, run_dir = source, None
         s = load_scenario(scenario, list(overrides))
     grid, truth_rows = estimate_inputs(s, path, truth)

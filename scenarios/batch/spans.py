@@ -137,6 +137,13 @@ def solve_spans(s: Scenario, tel: Measured, pitch_rad, rows=(), t_s=None,
     model = model or cfg.model
     span_h = cfg.span_h if span_h is None else span_h
     overlap_h = cfg.overlap_h if overlap_h is None else overlap_h
+    # The command line checks its --span-h and --overlap-h; dynprop.batch() and other
+    # callers come here directly (a NaN or infinite span made an IndexError).
+    if not (np.isfinite(span_h) and span_h > 0):
+        raise BatchError(f"batch.span_h: {span_h:g} h must be a positive number of hours")
+    if not (np.isfinite(overlap_h) and overlap_h >= 0):
+        raise BatchError(f"batch.overlap_h: {overlap_h:g} h must be a positive number of "
+                         "hours or 0")
     if overlap_h >= span_h:
         raise BatchError(f"batch.overlap_h: {overlap_h:g} h must be shorter than batch.span_h "
                          f"({span_h:g} h)")
