@@ -40,6 +40,25 @@ def _state_dict(x, omega_n: float, prefix: str = "") -> dict:
             for k, (name, v) in enumerate(zip(STATE_COLUMNS, x, strict=True))}
 
 
+def _overlap(run: BatchRun, j: int) -> dict | None:
+    """Batch j against batch j − 1 where both fitted the samples (an overlap): the
+    RMS and largest difference of their roll and yaw, the overlap comparison of
+    definitive solutions.  None without an overlap or a converged pair."""
+    if j == 0:
+        return None
+    prev, cur = run.spans[j - 1], run.spans[j]
+    a, b = cur.a, min(prev.b, cur.b)
+    sp, sc = run.solutions[j - 1], run.solutions[j]
+    if b <= a or not (sp.converged and sc.converged):
+        return None
+    d = (sc.x[0:b - a] - sp.x[a - prev.a:b - prev.a])[:, [0, 2]] * RAD2DEG
+    return {"samples": int(b - a),
+            "roll_rms_deg": float(np.sqrt(np.mean(d[:, 0] ** 2))),
+            "yaw_rms_deg": float(np.sqrt(np.mean(d[:, 1] ** 2))),
+            "roll_max_deg": float(np.max(np.abs(d[:, 0]))),
+            "yaw_max_deg": float(np.max(np.abs(d[:, 1])))}
+
+
 def _batch_entries(run: BatchRun, t: np.ndarray, omega_n: float) -> list[dict]:
     out = []
     for sp, sol, prior in zip(run.spans, run.solutions, run.priors, strict=True):
@@ -60,6 +79,7 @@ def _batch_entries(run: BatchRun, t: np.ndarray, omega_n: float) -> list[dict]:
                 None if not np.isfinite(v) else float(v) for v in sol.residual_normalized),
                 strict=True)),
             "fixed_states": list(sol.fixed), "message": sol.message or None,
+            "overlap": _overlap(run, sp.index),
             "state": _state_dict(sol.x0, omega_n),
             "sigma": _state_dict(np.sqrt(np.diag(sol.P0)), omega_n, "sigma_"),
             "sigma_consider": None if sc is None else _state_dict(sc, omega_n,

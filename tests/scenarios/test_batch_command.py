@@ -41,7 +41,7 @@ TOP_KEYS = {"scenario", "command", "model", "span_h", "overlap_h", "apriori", "t
             "converged", "not_converged", "warnings", "batches", "truth"}
 BATCH_KEYS = {"index", "epoch_s", "span_s", "samples", "measurements", "a_priori",
               "converged", "iterations", "cost", "cost_per_measurement", "residual_rms",
-              "residual_rms_over_sigma", "fixed_states", "message", "state", "sigma",
+              "residual_rms_over_sigma", "fixed_states", "message", "overlap", "state", "sigma",
               "sigma_consider"}
 FILTER_PRIOR = "the filter's prior (estimator.initial_sigma)"
 # The columns a telemetry file needs (docs/telemetry.md), as telemetry.csv names them.
@@ -664,3 +664,9 @@ def test_an_overlap_is_owned_by_the_later_batch(run, halves, telemetry, tmp_path
     assert b0 == halves["scenario"][0]["batches"][0]
     cols = read_csv(out / "estimate_batch.csv")
     np.testing.assert_array_equal(cols["batch"], (cols["t_s"] >= epoch).astype(float))
+    # The overlap comparison: both independent solutions over the 2 h both fitted,
+    # differing by no more than their own uncertainty (measured 0.3 of the combined σ).
+    ov = b1["overlap"]
+    assert b0["overlap"] is None and ov["samples"] == int(((t >= epoch) & (t < 43200)).sum())
+    both = np.hypot(b0["sigma"]["sigma_yaw_deg"], b1["sigma"]["sigma_yaw_deg"])
+    assert 0 < ov["yaw_rms_deg"] <= ov["yaw_max_deg"] < 3 * both
