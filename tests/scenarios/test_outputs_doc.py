@@ -3,8 +3,9 @@
 Each CSV column, each summary.json and batch.json key (at any depth), each
 comparison.npz key and each Monte Carlo case-record key written by a short
 `simulate`, `run`, `run --montecarlo-case`, `estimate` and `batch` must appear in
-the document as a `code` span, literally or through a placeholder (`wheel<i>_rpm`, `<head>_alpha_deg`,
-`<source>_x_Nm` with the source itself named, `sigma_<state column>`)."""
+the document as a `code` span, literally or through a placeholder (`wheel<i>_rpm`,
+`<head>_alpha_deg`, `<source>_x_Nm` with the source itself named,
+`sigma_<state column>`)."""
 
 from __future__ import annotations
 
