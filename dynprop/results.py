@@ -31,6 +31,17 @@ def _table(path: Path) -> pd.DataFrame | None:
     return pd.DataFrame(cols, index=index)
 
 
+def _png_figure(path: Path):
+    """A saved PNG as a matplotlib Figure (an image of the file)."""
+    import matplotlib.image as mpimg
+    import matplotlib.pyplot as plt
+    img = mpimg.imread(path)
+    fig, ax = plt.subplots(figsize=(img.shape[1] / 100, img.shape[0] / 100))
+    ax.imshow(img)
+    ax.axis("off")
+    return fig
+
+
 class _Directory:
     """A directory of files the CLI writes, owned (temporary) or borrowed."""
 
@@ -205,13 +216,7 @@ class TuneResult(_Directory):
 
     def figure(self):
         """tune.png as a matplotlib Figure (an image of the saved file)."""
-        import matplotlib.image as mpimg
-        import matplotlib.pyplot as plt
-        img = mpimg.imread(self.path / "tune.png")
-        fig, ax = plt.subplots(figsize=(img.shape[1] / 100, img.shape[0] / 100))
-        ax.imshow(img)
-        ax.axis("off")
-        return fig
+        return _png_figure(self.path / "tune.png")
 
 
 class BatchResult(_Directory):
@@ -234,10 +239,4 @@ class BatchResult(_Directory):
 
     def figure(self):
         """batch.png as a matplotlib Figure (an image of the saved file)."""
-        import matplotlib.image as mpimg
-        import matplotlib.pyplot as plt
-        img = mpimg.imread(self.path / "batch.png")
-        fig, ax = plt.subplots(figsize=(img.shape[1] / 100, img.shape[0] / 100))
-        ax.imshow(img)
-        ax.axis("off")
-        return fig
+        return _png_figure(self.path / "batch.png")

@@ -28,6 +28,8 @@ import numpy as np
 from dynprop.eom.gyrostat import dcm_from_quat, euler312, euler312_rates
 
 from . import ekf_model as m
+from .ekf import _pack_sym as _pack_sym_iu
+from .ekf import _unpack_sym as _unpack_sym_iu
 from .kalman_steps import (
     _IU,
     MEAS_STATES,
@@ -46,18 +48,6 @@ N_C = len(CONSIDER_NONLINEAR)
 # Batch parameters: the EKF's (``ekf_model.pack_params``), then tan and cot of the
 # nominal cant (the consider cant's first-order scale factors).
 N_PB = m.N_PARAMS + 2
-
-
-def _packed_sym(P, iu) -> ca.SX:
-    return ca.vertcat(*(P[i, j] for i, j in zip(*iu, strict=True)))
-
-
-def _unpacked_sym(p, n, iu) -> ca.SX:
-    P = ca.SX(n, n)
-    for k, (i, j) in enumerate(zip(*iu, strict=True)):
-        P[i, j] = p[k]
-        P[j, i] = p[k]
-    return P
 
 
 # --- linear -----------------------------------------------------------------------
@@ -84,7 +74,7 @@ def linear_step() -> ca.Function:
     Psi = _psi_sym(s[:n2])
     d = s[n2:n2 + N_STATES]
     o = n2 + N_STATES
-    Lam = _unpacked_sym(s[o:o + N_UT], N_STATES, _IU)
+    Lam = _unpack_sym_iu(s[o:o + N_UT], N_STATES, _IU)
     b = s[o + N_UT:o + N_UT + N_STATES]
     c = s[-1]
     for i, idx in enumerate(MEAS_STATES):
@@ -199,7 +189,7 @@ def nonlinear_step(n_consider: int, with_paper: bool) -> ca.Function:
     X = s[:m.NX]
     Psi = ca.reshape(s[m.NX:m.NX + m.NX * k], m.NX, k)
     o = m.NX + m.NX * k
-    Lam = _unpacked_sym(s[o:o + nlam], k, iu)
+    Lam = _unpack_sym_iu(s[o:o + nlam], k, iu)
     b, cost = s[o + nlam:o + nlam + k], s[-1]
     # The direct dependence on c, as extra columns: ∂/∂c = [0 | I] in (x_0, c).
     seed_c = ca.horzcat(ca.SX.zeros(n_consider, N_STATES), ca.SX.eye(n_consider)) \
@@ -221,7 +211,7 @@ def nonlinear_step(n_consider: int, with_paper: bool) -> ca.Function:
         res.append(mask[i] * e)
     X_next = model_step(X, u, pitch, pb, c_used)
     Psi_next = ca.jtimes(X_next, Xc, Psi_c)
-    s_next = ca.vertcat(X_next, ca.reshape(Psi_next, -1, 1), _packed_sym(Lam, iu), b, cost)
+    s_next = ca.vertcat(X_next, ca.reshape(Psi_next, -1, 1), _pack_sym_iu(Lam, iu), b, cost)
     aux = ca.vertcat(*res)
     if with_paper:
         x9 = m.paper_coordinates(X, pb[:m.N_PARAMS], wn)
