@@ -207,7 +207,7 @@ def _cmd_batch(args) -> int:
     start = time.perf_counter()
     d, out = run_batch(args.source, args.scenario, args.set, args.truth, args.out, args.model,
                        args.span_h, args.overlap_h, force=args.force or args.out is None,
-                       command=shlex.join(["dynprop", *sys.argv[1:]]))
+                       command=shlex.join(["dynprop", *args.argv]))
     print(one_line(d))
     for line in d["warnings"]:
         print(f"warning: {line}")
@@ -226,7 +226,7 @@ def _cmd_tune(args) -> int:
     start = time.perf_counter()
     d, out = run_tune(args.source, args.scenario, args.set, args.out, options,
                       force=args.force or args.out is None,
-                      command=shlex.join(["dynprop", *sys.argv[1:]]))
+                      command=shlex.join(["dynprop", *args.argv]))
     print(one_line(d))
     print(f"{time.perf_counter() - start:.1f} s; wrote {out}/: tune.json, tune.md, "
           "tuned_noise.yaml, tune.png")
@@ -352,6 +352,9 @@ def os_error_line(exc: OSError, args) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # The command line as given, for the reports that record it (main([...]) from
+    # Python or a test has its own, not the interpreter's sys.argv).
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     from dynprop.estimator.batch import BatchError
 
     from .config.loader import ScenarioError

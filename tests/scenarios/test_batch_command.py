@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 import tempfile
 from pathlib import Path
 
@@ -164,7 +165,11 @@ def test_batch_json_holds_every_key_and_counts_the_telemetry(batches, run, telem
     assert set(d) == TOP_KEYS
     assert (d["scenario"], d["model"], d["span_h"], d["overlap_h"], d["apriori"]) == (
         "goes_next_equinox", model, 24.0, 0.0, "chain")
-    assert d["command"].startswith("dynprop ")
+    # The command as given to main(), not the interpreter's sys.argv (under a bare
+    # `pytest` that was just "dynprop").
+    extra = () if model == "linear" else ("--out", str(batches[model][3]))
+    assert d["command"] == shlex.join(["dynprop", "batch", str(run), "--model", model,
+                                       *extra])
     t = telemetry["t_s"]
     assert d["telemetry"] == {"file": str((run / "telemetry.csv").resolve()),
                               "samples": len(t), "first_t_s": 0.0, "last_t_s": float(DAY_S)}
