@@ -45,10 +45,13 @@ class BatchError(ValueError):
 
 @dataclass(frozen=True)
 class Prior:
-    """The a priori at the batch epoch: state x (9) and covariance P (9×9)."""
+    """The a priori at the batch epoch: state x (9) and covariance P (9×9), and x's
+    sensitivity S = ∂x/∂c (9×m) to the consider parameters when x is itself an
+    estimate (a chained batch's: the previous solution), else None."""
 
     x: np.ndarray
     P: np.ndarray
+    S: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -74,6 +77,7 @@ class BatchSolution:
     P_rows: np.ndarray
     P_consider_rows: np.ndarray | None
     message: str = ""
+    S_rows: np.ndarray | None = None   # ∂x/∂c at ``rows`` (the next chained a priori's S)
 
 
 # --- the normal equations ---------------------------------------------------------
@@ -284,14 +288,17 @@ def linear_batch(data: LinearData, prior: Prior | None, rows=(),
     # J at the solution: the data's sum of squares (from the normal equations about 0)
     # and the a priori's term.
     cost = c - 2 * b @ x0 + x0 @ Lam @ x0 + with_prior(Lam, b, x0, prior, fixed)[2]
-    P0c = Pc_rows = None
+    P0c = Pc_rows = S_rows = None
     if consider:
         S0 = np.zeros((N_STATES, len(consider)))
         S_rows = np.zeros((len(rows), N_STATES, len(consider)))
         for j, case in enumerate(consider):
             ends = []
-            for d in (case.plus, case.minus):
-                xj = _solve_linear(d, prior, fixed)[0]
+            for d, sign in ((case.plus, 1), (case.minus, -1)):
+                # A chained a priori moves with c too: shift its mean by ±δ S̄.
+                pj = prior if prior is None or prior.S is None else Prior(
+                    prior.x + sign * case.delta * prior.S[:, j], prior.P)
+                xj = _solve_linear(d, pj, fixed)[0]
                 xh, _ = propagate_linear(d, xj, np.zeros((N_STATES, N_STATES)), rows[:0])
                 ends.append((xj, xh[rows]))
             S0[:, j] = (ends[0][0] - ends[1][0]) / (2 * case.delta)
@@ -301,4 +308,5 @@ def linear_batch(data: LinearData, prior: Prior | None, rows=(),
         Pc_rows = P_rows + np.einsum("kic,cd,kjd->kij", S_rows, C, S_rows)
     rms, norm = residual_stats(z - x[:, list(MEAS_STATES)], z, data.meas.r())
     return BatchSolution(x0, P0, P0c, True, 1, float(cost), (float(cost),), rms, norm, counts,
-                         tuple(STATE_NAMES[i] for i in fixed), x, rows, P_rows, Pc_rows)
+                         tuple(STATE_NAMES[i] for i in fixed), x, rows, P_rows, Pc_rows,
+                         S_rows=S_rows)

@@ -231,10 +231,15 @@ def nonlinear_batch(data: NonlinearData, prior: Prior | None, x_start: np.ndarra
     T = final.T
     Tx = T[:, :, :N_STATES]
     P_rows = np.einsum("kia,ab,kjb->kij", Tx, np.nan_to_num(P0), Tx)
-    P0c = Pc_rows = None
+    P0c = Pc_rows = S_rows = None
     if n_c:
-        # S = ∂x̂_0/∂c = −N⁻¹ Λ_xc (the fixed states' rows zero: held at the a priori).
+        # S = ∂x̂_0/∂c = N⁻¹ (P̄⁻¹ S̄ − Λ_xc): the data's part, and a chained a priori's
+        # own sensitivity S̄ through its weight (the fixed states' rows: held at x̄).
         S0 = -Ninv @ final.Lam[:N_STATES, N_STATES:]
+        if prior is not None and prior.S is not None:
+            Pi = np.linalg.inv(prior.P)
+            S0 = S0 + Ninv @ (0.5 * (Pi + Pi.T)) @ prior.S
+            S0[list(fixed)] = prior.S[list(fixed)]
         C = np.diag(np.square(consider_sigma))
         P0c = P0 + S0 @ C @ S0.T
         S_rows = Tx @ S0 + T[:, :, N_STATES:]
@@ -242,4 +247,4 @@ def nonlinear_batch(data: NonlinearData, prior: Prior | None, x_start: np.ndarra
     rms, norm = residual_stats(final.res, z, np.asarray(data.r, dtype=float))
     return BatchSolution(x, P0, P0c, converged, passes, float(J), tuple(costs), rms, norm,
                          counts, tuple(STATE_NAMES[i] for i in fixed),
-                         final.x, rows, P_rows, Pc_rows, message)
+                         final.x, rows, P_rows, Pc_rows, message, S_rows)

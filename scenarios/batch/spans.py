@@ -196,7 +196,8 @@ def solve_spans(s: Scenario, tel: Measured, pitch_rad, rows=(), t_s=None,
         if cfg.apriori == "chain" and sol.converged:
             k = int(np.searchsorted(want, nxt.a - sp.a))
             P = sol.P_rows[k]
-            prior = Prior(sol.x[nxt.a - sp.a].copy(), 0.5 * (P + P.T))
+            S = None if sol.S_rows is None else sol.S_rows[k]
+            prior = Prior(sol.x[nxt.a - sp.a].copy(), 0.5 * (P + P.T), S)
             source = f"batch {sp.index}, propagated to this epoch"
         else:
             prior = Prior(x_bar, P_bar)

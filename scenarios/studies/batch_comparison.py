@@ -125,8 +125,8 @@ def one_case(case: str, k: int | None, spans_h: tuple[float, ...], extra=()) -> 
 
 
 def run_all(jobs: list[tuple], workers: int, store: Path) -> None:
-    """Run ``jobs`` (case, k, spans) in a pool, appending each record to ``store`` as
-    it arrives."""
+    """Run ``jobs`` (case, k, spans, overrides) in a pool, appending each record to
+    ``store`` as it arrives."""
     worker = importlib.import_module(WORKER_MODULE).one_case
     with clean_start_context([WORKER_MODULE]) as ctx, worker_pool(workers, ctx) as pool, \
             store.open("a") as fh:
