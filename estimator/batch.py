@@ -33,7 +33,7 @@ import numpy as np
 import scipy.linalg
 
 from .kalman import Measurements, _param_rows, kalman_filter
-from .kalman_steps import MEAS_STATES, pack_params, unpack
+from .kalman_steps import MEAS_STATES, N_UT, pack_params, unpack
 from .model import N_STATES, NCZ, STATE_NAMES, ProcessNoise
 from .steps import StepTable, roll_blocks
 from .transition import Discretization
@@ -188,7 +188,7 @@ def linear_normal(data: LinearData) -> tuple[np.ndarray, np.ndarray, float]:
     n = len(z)
     present = np.isfinite(z)
     n2 = N_STATES**2
-    s0 = np.zeros(n2 + N_STATES + 45 + N_STATES + 1)
+    s0 = np.zeros(n2 + N_STATES + N_UT + N_STATES + 1)
     s0[:n2] = np.eye(N_STATES).ravel(order="F")
     inputs = [np.where(present, z, 0.0), present.astype(float), r, np.asarray(data.u, float)]
     if isinstance(data.disc, StepTable):

@@ -37,7 +37,7 @@ from .batch import (
     with_prior,
 )
 from .model import N_STATES, STATE_NAMES
-from .steps import per_step, roll_blocks
+from .steps import per_step, roll_blocks, step_params, substeps
 
 MU_MAX = 1e8
 MU_START = 1e-4
@@ -93,16 +93,12 @@ class _Pass:
 
 def _substeps(data: NonlinearData):
     """Each sample's interval cut into RK4 steps no longer than the nominal one
-    (``ekf.ekf_filter``'s rule), and the sub-step each sample starts."""
-    n = len(data)
-    nominal = float(data.params[m.DT_INDEX])
+    (``steps.substeps``, the EKF's rule), and the sub-step each sample starts; on
+    the grid, one step each (``h`` None)."""
     if data.dt_s is None:
+        n = len(data)
         return np.arange(n), np.arange(n), None
-    dt = np.asarray(data.dt_s, dtype=float)
-    subs = np.maximum(np.ceil(dt / nominal * (1 - 1e-12)), 1).astype(np.int64)
-    first = np.r_[0, np.cumsum(subs)[:-1]]
-    src = np.repeat(np.arange(n), subs)
-    return src, first, (dt / subs)[src]
+    return substeps(data.dt_s, float(data.params[m.DT_INDEX]))
 
 
 def run_pass(data: NonlinearData, x0: np.ndarray, n_consider: int = 0,
@@ -141,15 +137,9 @@ def run_pass(data: NonlinearData, x0: np.ndarray, n_consider: int = 0,
         last, every, at_rows = eng.run_columns(s0, inputs, np.asarray(data.params, float),
                                                cols, kept, row_cols)
     else:
-        base = np.asarray(data.params, dtype=float)
-
-        def params_of(a, b):
-            p = np.repeat(base[None, :], b - a, axis=0)
-            p[:, m.DT_INDEX] = h[a:b]
-            return p
-
-        last, every, at_rows = roll_blocks(eng, s0, inputs, len(src), params_of, cols, kept,
-                                           row_cols)
+        last, every, at_rows = roll_blocks(eng, s0, inputs, len(src),
+                                           step_params(data.params, m.DT_INDEX, h), cols,
+                                           kept, row_cols)
     every = every[first]
     o = m.NX + m.NX * k
     iu = np.triu_indices(k)

@@ -24,7 +24,7 @@ from dynprop.rollout.chunks import ChunkedRollout
 
 from . import ekf_model as m
 from .kalman import N_UT, FilterResult
-from .steps import per_step, roll_blocks
+from .steps import per_step, roll_blocks, step_params, substeps
 
 _IU = np.triu_indices(m.NE)
 N_UT_E = len(_IU[0])   # 66
@@ -217,22 +217,15 @@ def _ekf_per_step(inputs: EkfInputs, params, omega_n_radps, X0, P0, backend, chu
     if dt_s.shape != (n,) or not np.all(np.isfinite(dt_s) & (dt_s > 0)):
         raise ValueError(f"dt_s must hold {n} positive intervals")
     nominal = float(params[m.DT_INDEX])
-    subs = np.maximum(np.ceil(dt_s / nominal * (1 - 1e-12)), 1).astype(np.int64)
-    first = np.r_[0, np.cumsum(subs)[:-1]]     # each sample's own (first) sub-step
-    src = np.repeat(np.arange(n), subs)
+    src, first, h = substeps(dt_s, nominal)     # first: each sample's own sub-step
     fresh = np.zeros(len(src), dtype=bool)
     fresh[first] = True
     zz = np.where(fresh[:, None], z[src], np.nan)
     expanded = EkfInputs(zz, np.asarray(inputs.r, dtype=float)[src],
                          np.asarray(inputs.u, dtype=float)[src])
     keep = first if rows is None else first[np.asarray(rows, dtype=np.int64)]
-    h = (dt_s / subs)[src]
-    base = np.concatenate([np.asarray(params, dtype=float), [omega_n_radps]])
-
-    def params_of(a, b):
-        p = np.repeat(base[None, :], b - a, axis=0)
-        p[:, m.DT_INDEX] = h[a:b]
-        return p
+    params_of = step_params(np.concatenate([np.asarray(params, dtype=float),
+                                            [omega_n_radps]]), m.DT_INDEX, h)
 
     z2, r2, u2 = expanded.z, expanded.r, expanded.u
     present = np.isfinite(z2)

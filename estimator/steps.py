@@ -138,3 +138,27 @@ def roll_blocks(engine, s0: np.ndarray, inputs: list[np.ndarray], n_steps: int,
                                      rows[lo:hi] - start, row_columns)
         every[start:stop], kept[lo:hi] = e, k
     return x, every, kept
+
+
+def substeps(dt_s, nominal_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each interval of ``dt_s`` cut into equal integration sub-steps no longer than
+    ``nominal_s`` (an RK4 step is accurate only over a small part of the nutation
+    period): for each sub-step the sample it belongs to (``src``) and its length
+    (``h``), and the sub-step each sample starts (``first``)."""
+    dt = np.asarray(dt_s, dtype=float)
+    subs = np.maximum(np.ceil(dt / nominal_s * (1 - 1e-12)), 1).astype(np.int64)
+    first = np.r_[0, np.cumsum(subs)[:-1]]
+    src = np.repeat(np.arange(len(dt)), subs)
+    return src, first, (dt / subs)[src]
+
+
+def step_params(base: np.ndarray, index: int, h: np.ndarray):
+    """``roll_blocks``' ``params_of`` for a per-step parameter vector: ``base`` with entry
+    ``index`` (the step length) set to each step's ``h``."""
+    base = np.asarray(base, dtype=float)
+
+    def params_of(a, b):
+        p = np.repeat(base[None, :], b - a, axis=0)
+        p[:, index] = h[a:b]
+        return p
+    return params_of

@@ -29,10 +29,6 @@ from .source import read_source
 from .spans import PAPER_MIN_SPAN_H, BatchRun, solve_spans
 
 
-def _sigma(P: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.maximum(np.einsum("kii->ki", P), 0.0)) if P.size else np.zeros((0, 9))
-
-
 def _state_dict(x, omega_n: float, prefix: str = "") -> dict:
     f = display_factors(omega_n)
     return {f"{prefix}{name}": None if not np.isfinite(v) else float(v * abs(f[k]) if prefix
@@ -134,7 +130,7 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
                                                                         grid.steps)
     real, args = filter_telemetry(s, params, disc, *tel, t_s=None if grid.regular else t)
     smoothed = paper_smoother(design_of(s), real, disc, **args)
-    sig_b, sig_c = _sigma(run.P_rows), _sigma(run.P_consider_rows)
+    sig_b, sig_c = run.sigma_rows, run.sigma_consider_rows
     at_k = np.searchsorted(rows, k)
     d = {"scenario": s.name, "command": command, "model": model, "span_h": span_h,
          "overlap_h": overlap_h, "apriori": s.batch.apriori,

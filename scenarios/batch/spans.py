@@ -127,6 +127,16 @@ class BatchRun:
     P_rows: np.ndarray
     P_consider_rows: np.ndarray
 
+    @property
+    def sigma_rows(self) -> np.ndarray:
+        """1σ of each state at ``rows`` (R, 9); NaN where the batch did not converge."""
+        return np.sqrt(np.diagonal(self.P_rows, axis1=1, axis2=2))
+
+    @property
+    def sigma_consider_rows(self) -> np.ndarray:
+        """The same with the consider parameters."""
+        return np.sqrt(np.diagonal(self.P_consider_rows, axis1=1, axis2=2))
+
 
 def solve_spans(s: Scenario, tel: Measured, pitch_rad, rows=(), t_s=None,
                 model: str | None = None, span_h: float | None = None,

@@ -81,11 +81,6 @@ def batch_entry(run, judged: dict) -> dict:
                          for v in np.array([sol.residual_normalized for sol in sols]).T]}
 
 
-def _sigma(P: np.ndarray) -> np.ndarray:
-    """1σ of each state from covariances (k, 9, 9)."""
-    return np.sqrt(np.maximum(np.diagonal(P, axis1=1, axis2=2), 0.0))
-
-
 @blas_one_thread()
 def one_case(case: str, k: int | None, spans_h: tuple[float, ...], extra=()) -> dict:
     """The record of Monte Carlo case ``k`` of ``case`` (None: the nominal run), with
@@ -113,8 +108,8 @@ def one_case(case: str, k: int | None, spans_h: tuple[float, ...], extra=()) -> 
         jobs = [("nonlinear", h) for h in spans_h] + [("linear", LINEAR_SPAN_H)]
         for model, span_h in jobs:
             b = solve_spans(s, tel, pitch, rows, None, model, span_h, 0.0)
-            judged = compare(t, rows, truth, {"batch": (b.x[rows], _sigma(b.P_rows))}, gaps,
-                             _sigma(b.P_consider_rows))
+            judged = compare(t, rows, truth, {"batch": (b.x[rows], b.sigma_rows)}, gaps,
+                             b.sigma_consider_rows)
             out[f"{model}_{span_h:g}h"] = batch_entry(b, judged["batch"])
         return head | {"status": "ok", "epoch_utc": flying.epoch_utc,
                        "wall_s": time.perf_counter() - start, **out}
