@@ -34,6 +34,12 @@ def test_the_wheel_installs_only_the_dynprop_namespace_and_resists_shadowing(tmp
     assert tops == {"dynprop", wheel.name.split("-py3")[0] + ".dist-info"}
     names = zipfile.ZipFile(wheel).namelist()
     assert "dynprop/py.typed" in names
+    # Every package of the source tree is in the wheel (a room left out of pyproject's
+    # list imports in the editable checkout and fails in a user's install).
+    packages = {str(p.parent.relative_to(ROOT)) for folder in ("sim", "estimator", "scenarios",
+                "plots", "rollout", "eom") for p in (ROOT / folder).rglob("__init__.py")}
+    assert {f"dynprop/{p}/__init__.py" for p in packages} <= set(names), \
+        sorted({f"dynprop/{p}/__init__.py" for p in packages} - set(names))
     assert "dynprop/scenarios/bundled/goes_next_equinox.yaml" in names
     assert any(n.endswith("dist-info/licenses/LICENSE") or n.endswith("dist-info/LICENSE")
                for n in names)
