@@ -18,15 +18,15 @@ from dynprop.scenarios import __version__
 # and the facade's tables (pandas) and statistics would cost the CLI half a
 # second of start-up it never uses.
 _API = ("ScenarioError", "batch", "covariance", "linearization", "load_scenario", "montecarlo",
-        "observability", "open_run", "run", "simulate", "tune")
+        "observability", "open_run", "report", "run", "simulate", "tune")
 _RESULTS = ("BatchResult", "LinearizationResult", "MonteCarloResult", "RunResult",
             "SimulationResult", "TextReport", "TuneResult")
 
 __all__ = [  # noqa: F822 - defined by __getattr__ below
     "BatchResult", "LinearizationResult", "MonteCarloResult", "RunResult", "ScenarioError",
     "SimulationResult", "TextReport", "TuneResult", "__version__", "batch", "covariance",
-    "linearization", "load_scenario", "montecarlo", "observability", "open_run", "run",
-    "simulate", "tune",
+    "linearization", "load_scenario", "montecarlo", "observability", "open_run", "report",
+    "run", "simulate", "tune",
 ]
 
 

@@ -95,6 +95,19 @@ def run(scenario: Scenario | str) -> RunResult:
     return RunResult(out, owner)
 
 
+def report(path, yaw_requirement_deg: float | None = None) -> Path:
+    """One self-contained HTML page of a directory the CLI (or ``save``) wrote, as
+    `dynprop report DIR`: ``DIR/report.html``, returned.  ``path``: the directory, or
+    a result object (``RunResult``, ``MonteCarloResult``, …; ``r.report()`` is the
+    same)::
+
+        dynprop.report("runs/eq", yaw_requirement_deg=0.1)   # runs/eq/report.html
+
+    ``yaw_requirement_deg`` overrides the scenario's ``report.yaw_requirement_deg``."""
+    from dynprop.scenarios.review.report import write_report
+    return write_report(Path(getattr(path, "path", path)), None, yaw_requirement_deg)
+
+
 def open_run(path: str | Path):
     """A directory written by the CLI or by ``save``: a `run`/`estimate` directory
     as ``RunResult``, a Monte Carlo set as ``MonteCarloResult``, a `simulate` one as

@@ -62,6 +62,12 @@ class _Directory:
             shutil.copytree(self.path, stage, dirs_exist_ok=True)
         return out
 
+    def report(self, yaw_requirement_deg: float | None = None) -> Path:
+        """The directory's review page, as `dynprop report`: report.html written into it
+        (``save`` then copies it too); returns its path."""
+        from dynprop.scenarios.review.report import write_report
+        return write_report(self.path, None, yaw_requirement_deg)
+
     def __repr__(self) -> str:
         where = "temporary" if self._owner is not None else str(self.path)
         return f"<{type(self).__name__} {where}>"

@@ -118,6 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
                             "linear twin; errors, summary and figures",
                             "new run directory (default runs/NAME-TIME)", required=False)
     _tuned_arg(run)
+    run.add_argument("--report", action="store_true", help="also write report.html, the "
+                     "run's review page (as `dynprop report`)")
     run.add_argument("--montecarlo-case", type=_case_number, metavar="K",
                      help="fly Monte Carlo case K of the scenario's dispersions (the filter "
                      "stays nominal), reproducing `dynprop montecarlo`'s case K bit for bit")
@@ -220,6 +222,15 @@ def build_parser() -> argparse.ArgumentParser:
     _out_args(batch, "output directory (default: RUN_DIR/batch, or batch/ beside the file)",
               required=False, force="replace a non-empty --out (RUN_DIR/batch is replaced "
               "anyway)")
+    report = sub.add_parser("report", help="one self-contained HTML page of a directory "
+                            "dynprop wrote, opened offline: verdict, interactive figures, "
+                            "tables, scenario, provenance (DIR/report.html)")
+    report.add_argument("dir", type=Path, metavar="DIR", help="a `run`, `estimate`, "
+                        "`simulate`, `montecarlo`, `linearization`, `trim`, `tune` or "
+                        "`batch` directory")
+    report.add_argument("--yaw-requirement-deg", type=float, metavar="DEG",
+                        help="the yaw requirement to judge against, 3σ over 24 h (default: "
+                        "the scenario's report.yaw_requirement_deg; none: not tested)")
     plot = sub.add_parser("plot", help="(re)draw the figures of a run or Monte Carlo directory")
     plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser

@@ -110,10 +110,29 @@ def _cmd_run(args) -> int:
     with staged_run_dir(out, force=args.force) as stage:
         summary = run_to_directory(scenario, stage, montecarlo_case=case)
         _note_tuned(args, stage / "summary.json")
+        if args.report:
+            # Inside the stage: the directory appears whole, page included, or not at all.
+            from .review.report import write_report
+            write_report(stage, _command(args))
     from .console import run_lines
     for line in run_lines(scenario.name, summary, time.perf_counter() - start):
         print(line)
-    print(f"figures: {out}/plots/")
+    print(f"figures: {out}/plots/" + (f"; review page: {out}/report.html" if args.report
+                                       else ""))
+    return 0
+
+
+def _command(args) -> str:
+    return shlex.join(["dynprop", *args.argv])
+
+
+def _cmd_report(args) -> int:
+    from .review.report import write_report
+    start = time.perf_counter()
+    path = write_report(args.dir, _command(args), args.yaw_requirement_deg)
+    size = path.stat().st_size / 1e6
+    print(f"wrote {path} ({size:.1f} MB, {time.perf_counter() - start:.1f} s): one "
+          "self-contained page, open it in a browser (no network needed)")
     return 0
 
 
@@ -325,7 +344,7 @@ COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd
             "observability": _cmd_observability, "covariance": _cmd_covariance,
             "linearization": _cmd_linearization, "montecarlo": _cmd_montecarlo,
             "trim": _cmd_trim, "tune": _cmd_tune,
-            "batch": _cmd_batch}
+            "batch": _cmd_batch, "report": _cmd_report}
 
 
 def os_error_line(exc: OSError, args) -> str:

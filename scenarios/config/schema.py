@@ -21,6 +21,7 @@ from ..units import DAY_S
 from .batch import Batch
 from .estimation import DEFAULT_OUTPUT_INTERVAL_S, TELEMETRY_AUTO_MAX_S, Estimator, Output, Trim
 from .montecarlo import MonteCarlo, check_dispersion
+from .report import Report
 from .sections import (
     Control,
     Disturbance,
@@ -88,6 +89,7 @@ class Scenario(_Section):
     trim: Trim = Field(default_factory=Trim)
     telemetry: Telemetry = Field(default_factory=Telemetry)
     batch: Batch = Field(default_factory=Batch)
+    report: Report = Field(default_factory=Report)
 
     @field_validator("dynprop_version", mode="before")
     @classmethod
@@ -182,7 +184,7 @@ _LATER_KEYS = (*((("sensors", *head), key, default) for head in
 def resolved_yaml(scenario: Scenario) -> str:
     """Every key with its value, defaults filled, stamped with this version; loads
     back to the same scenario.  The exceptions: ``environment.disturbance``,
-    ``telemetry``, ``batch``, ``estimator.bias_states`` and the outlier keys (``_LATER_KEYS``)
+    ``telemetry``, ``batch``, ``report``, ``estimator.bias_states`` and the outlier keys (``_LATER_KEYS``)
     are written only when they differ from their defaults, so that a scenario without
     them resolves to the very text it did before they existed (its run directories,
     and the digest that resumes a Monte Carlo set, unchanged)."""
@@ -193,6 +195,8 @@ def resolved_yaml(scenario: Scenario) -> str:
         del data["telemetry"]
     if scenario.batch == Batch():
         del data["batch"]
+    if scenario.report == Report():
+        del data["report"]
     if scenario.estimator.bias_states == type(scenario.estimator.bias_states)():
         del data["estimator"]["bias_states"]
     for where, key, default in _LATER_KEYS:

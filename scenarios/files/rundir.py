@@ -65,7 +65,7 @@ OWN_FILES = frozenset((
     "estimate.csv", "smoothed.csv", "daily.csv", "comparison.npz", "trim_loop.csv",
     "montecarlo.json", "montecarlo.npz", "montecarlo_case.json", "montecarlo_case.npz",
     "report.json", "report.md", "tune.json", "tune.md", "tuned_noise.yaml", "trim.json",
-    "trim.md", "batch.json")) | OWN_FIGURES
+    "trim.md", "batch.json", "report.html")) | OWN_FIGURES
 _OWN_PATTERN = re.compile(r"^(estimate_[a-z0-9_]+\.csv|case-\d+\.(json|npz|full\.npz))$")
 OWN_DIRS = frozenset(("plots", "cases", "trim", "tune", "verify", "batch"))
 # Temporaries of a write killed half way: ``.NAME.XXXXXXXX`` (montecarlo.store's
