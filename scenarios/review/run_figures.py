@@ -103,20 +103,20 @@ def errors(c: dict, ax: Axis, eq55_deg: float | None) -> Plot:
             ax, 3 * c["sigma"][:, col], c["err_real"][:, col],
             *(c[k][:, col] for k in ("err_linear", "err_ekf") if k in c))})
         data += tr.sigma_band(ax.x, c["sigma"][:, col], y, group="sigma", show=first)
-        # The linearized error under the real one: they differ by little, and the real
-        # error is what the page is about.
-        if "err_linear" in c:
-            data += tr.series(ax.x, c["err_linear"][:, col], "linearized error (linear twin)",
-                              tr.COLORS["linear"], y, group="linear", show=first)
-        lo, hi = _extremes(c, "err_real", col)
-        data += tr.series(ax.x, c["err_real"][:, col], "real error (filter on the truth)",
-                          tr.COLORS["real"], y, lo, hi, group="real", show=first)
+        # The EKF, then the linearized error, under the real one: the real error is
+        # what the page is about, and the others differ from it by little.
         if "err_ekf" in c:
             data += tr.series(ax.x, c["err_ekf"][:, col], "EKF error", tr.COLORS["ekf"], y,
                               group="ekf", show=first)
             if "sigma_ekf" in c:
                 data += tr.sigma_band(ax.x, c["sigma_ekf"][:, col], y, "EKF ±3σ",
                                       tr.COLORS["ekf"], "dot", group="ekf_sigma", show=first)
+        if "err_linear" in c:
+            data += tr.series(ax.x, c["err_linear"][:, col], "linearized error (linear twin)",
+                              tr.COLORS["linear"], y, group="linear", show=first)
+        lo, hi = _extremes(c, "err_real", col)
+        data += tr.series(ax.x, c["err_real"][:, col], "real error (filter on the truth)",
+                          tr.COLORS["real"], y, lo, hi, group="real", show=first)
         if n == "yaw" and eq55_deg is not None:
             shapes += [tr.hline(s * 3 * eq55_deg, y, tr.COLORS["paper"]) for s in (1, -1)]
     if "err_real_minus_linear" in c:
@@ -272,5 +272,6 @@ def season(daily: dict) -> Plot | None:
                         "y3"))
     caption = "One point per day of the run (daily.csv, every figure at the full sample rate)."
     return Plot("season", "The run's days", caption,
-                {"data": data, "layout": tr.stacked_layout(panels, "day of the run", 200)},
+                {"data": data, "layout": tr.stacked_layout(
+                    panels, "day of the run", 200, x_range=(day[0] - 0.5, day[-1] + 0.5))},
                 time_axis=False)
