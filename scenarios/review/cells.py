@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field
 
 DIGITS = 4   # significant digits shown; data-value keeps the file's own
@@ -53,8 +54,9 @@ def fmt(value) -> str:
     if isinstance(value, float):
         if math.isinf(value):
             return "∞" if value > 0 else "−∞"
-        if value.is_integer() and abs(value) < 1e12:
-            return str(int(value))
+        if 1e4 <= abs(value) < 1e12 or (value.is_integer() and abs(value) < 1e12):
+            # 86399.488 s as 86399 (within the four digits' tolerance), not 8.64e+04.
+            return str(round(value))
         return f"{value:.{DIGITS}g}"
     return str(value)
 
@@ -74,15 +76,30 @@ def text(s: str, css: str = "") -> Cell:
     return Cell(s, css=css)
 
 
+def _name(prefix: str, key) -> str:
+    """``prefix.key``; a key that holds a dot or a bracket (montecarlo.json's
+    dispersions, by scenario key path) quoted: ``prefix["spacecraft.inertia_kgm2"]``."""
+    k = str(key)
+    if "." in k or "[" in k or '"' in k:
+        return f"{prefix}[{json.dumps(k)}]"
+    return f"{prefix}.{k}" if prefix else k
+
+
+_PART = re.compile(r'\.?([^.\[\]]+)|\[(\d+)\]|\[("(?:[^"\\]|\\.)*")\]')
+
+
 def lookup(data, key: str):
-    """The value at a key path of ``cell``'s form (``a.b[2]``) in loaded JSON."""
-    node = data
-    for part in key.split("."):
-        name, _, rest = part.partition("[")
-        if name:
-            node = node[name]
-        for index in filter(None, rest.replace("]", "").split("[")):
-            node = node[int(index)]
+    """The value at a key path of ``cell``'s form (``a.b[2]``, ``a["b.c"].d``) in loaded
+    JSON."""
+    node, pos = data, 0
+    while pos < len(key):
+        m = _PART.match(key, pos)
+        if m is None:
+            raise KeyError(f"{key}: bad key path at {pos}")
+        name, index, quoted = m.groups()
+        node = node[name] if name is not None else (
+            node[int(index)] if index is not None else node[json.loads(quoted)])
+        pos = m.end()
     return node
 
 
@@ -91,7 +108,7 @@ def flatten(data: dict, prefix: str = "") -> list[tuple[str, object]]:
     element, in the file's order."""
     out = []
     for k, v in data.items():
-        path = f"{prefix}.{k}" if prefix else str(k)
+        path = _name(prefix, k)
         if isinstance(v, dict):
             out += flatten(v, path)
         elif isinstance(v, list):
@@ -117,16 +134,16 @@ def _flatten_list(items: list, path: str) -> list[tuple[str, object]]:
 # Dicts keyed by a state's column name (roll_deg, …) whose values are ratios.
 UNITLESS = ("nees_mean_per_state", "per_state_mean_after_convergence", "per_state_bounds_95",
             "per_state_test_95", "nees")
-SUFFIXES = (("_degps", "°/s"), ("_deg", "°"), ("_Nms", "N m s"), ("_Nm2s", "(N m)² s"),
-            ("_Nm", "N m"), ("_h", "h"), ("_s", "s"), ("_min", "min"), ("_rpm", "rpm"),
-            ("_Am2", "A m²"), ("_kgm2", "kg m²"))
+SUFFIXES = (("_Nm_per_deg", "N m/°"), ("_degps", "°/s"), ("_deg", "°"), ("_Nms", "N m s"),
+            ("_Nm2s", "(N m)² s"), ("_Nm", "N m"), ("_h", "h"), ("_s", "s"), ("_min", "min"),
+            ("_rpm", "rpm"), ("_Am2", "A m²"), ("_kgm2", "kg m²"))
 
 
 def unit_of(key: str) -> str:
     """The unit a key path's names carry (the files' convention: the unit in the name),
     the innermost name that has one: nonlinear_vs_linear.yaw_deg.rms_real is in
     degrees; a ratio keyed by a state's column (nees_mean_per_state.yaw_deg) has none."""
-    names = [part.split("[")[0] for part in key.split(".")]
+    names = [n.strip('"') for n in re.findall(r'"[^"]*"|[^.\[\]]+', key) if not n.isdigit()]
     if any(n in UNITLESS for n in names):
         return ""
     for name in reversed(names):

@@ -82,7 +82,8 @@ def reproduce(src: Source, kind: str) -> str:
         return (f"dynprop run {d}/scenario.yaml --montecarlo-case "
                 f"{src.record['montecarlo_case']} --out NEW_DIR")
     if kind == "montecarlo":
-        return src.record.get("reproduce_case") or f"dynprop montecarlo {d}/scenario.yaml"
+        return (f"dynprop montecarlo {d}/scenario.yaml --runs "
+                f"{src.record.get('runs_requested', 'N')} --out NEW_DIR")
     return f"dynprop {kind} {d}/scenario.yaml --out NEW_DIR"
 
 
@@ -101,13 +102,16 @@ def sections(src: Source, command: str | None, kind: str) -> list[Section]:
                 ("dynprop version that wrote it",
                  rec.get("dynprop_version") or scen.get("dynprop_version")),
                 ("CasADi backend", rec.get("backend")),
+                # tune, batch and linearization record the command that wrote them
+                ("command that wrote it", rec.get("command") or (rec.get("meta") or {})
+                 .get("command")),
                 ("written (file time, UTC)", _written(_record_file(src))),
                 ("reproduce with", reproduce(src, kind) if scenario_file.is_file() else None)]
     page_rows = [("dynprop version", __version__), ("git commit", git_commit() or "not known"),
                  ("command line", command or "the Python API"), ("date (UTC)", now_utc())]
-    tables = [Table("provenance-run", ["", ""], [[text(k), text(str(v))] for k, v in run_rows
+    tables = [Table("provenance-run", [], [[text(k), text(str(v))] for k, v in run_rows
                                                  if v is not None], "The run"),
-              Table("provenance-page", ["", ""], [[text(k), text(str(v))]
+              Table("provenance-page", [], [[text(k), text(str(v))]
                                                   for k, v in page_rows], "This page")]
     out.append(Section("provenance", "Provenance", tables=tables))
     out.append(Section("files", "Files", "The directory's files, relative to this page.",
@@ -134,6 +138,9 @@ def files(path: Path) -> list[tuple[str, str, str]]:
                                               else "")
             note = NOTES.get(p.name, "")
             out.append((f"{p.name}/", f"{p.name}/", f"{note}{': ' if note else ''}{shown}"))
+            if (p / "report.html").is_file():   # trim/, tune/, batch/: their own page
+                out.append((f"{p.name}/report.html", f"{p.name}/report.html",
+                            "its review page"))
             continue
         size = p.stat().st_size
         human = f"{size / 1e6:.1f} MB" if size >= 1e5 else f"{size / 1e3:.1f} kB"
