@@ -107,13 +107,13 @@ def errors(c: dict, ax: Axis, eq55_deg: float | None) -> Plot:
         # what the page is about, and the others differ from it by little.
         if "err_ekf" in c:
             data += tr.series(ax.x, c["err_ekf"][:, col], "EKF error", tr.COLORS["ekf"], y,
-                              group="ekf", show=first)
+                              group="ekf", show=first, outline=True)
             if "sigma_ekf" in c:
                 data += tr.sigma_band(ax.x, c["sigma_ekf"][:, col], y, "EKF ±3σ",
                                       tr.COLORS["ekf"], "dot", group="ekf_sigma", show=first)
         if "err_linear" in c:
             data += tr.series(ax.x, c["err_linear"][:, col], "linearized error (linear twin)",
-                              tr.COLORS["linear"], y, group="linear", show=first)
+                              tr.COLORS["linear"], y, group="linear", show=first, outline=True)
         lo, hi = _extremes(c, "err_real", col)
         data += tr.series(ax.x, c["err_real"][:, col], "real error (filter on the truth)",
                           tr.COLORS["real"], y, lo, hi, group="real", show=first)
@@ -122,7 +122,7 @@ def errors(c: dict, ax: Axis, eq55_deg: float | None) -> Plot:
     if "err_real_minus_linear" in c:
         y = tr.axis(len(panels))
         panels.append({"title": "real − linearized (deg)"})
-        for j, n, color in ((1, "yaw", tr.COLORS["real"]), (0, "roll", tr.COLORS["smoothed"])):
+        for j, n, color in ((1, "yaw", tr.COLORS["teal"]), (0, "roll", tr.COLORS["smoothed"])):
             lo, hi = _extremes(c, "err_real_minus_linear", j)
             data += tr.series(ax.x, c["err_real_minus_linear"][:, j],
                               f"{n}: real − linearized", color, y, lo, hi)
@@ -162,15 +162,17 @@ def consistency(c: dict, ax: Axis, summary: dict) -> Plot | None:
     nis_b = summary.get("nis_bounds_95_per_sample")
     if "nees_real" in c:
         panels.append({"title": "NEES (9 states)"})
-        for key, name, color in (("real", "NEES, real", tr.COLORS["real"]),
-                                 ("linear", "NEES, linearized", tr.COLORS["linear"])):
+        # The linearized NEES first, as outlines: the real one over it is the verdict.
+        for key, name, color in (("linear", "NEES, linearized", tr.COLORS["linear"]),
+                                 ("real", "NEES, real", tr.COLORS["real"])):
             if f"nees_{key}" not in c:
                 continue
             v = c[f"nees_{key}"]
             ok = np.isfinite(v)
             hi = c.get(f"nees_{key}_max")
             data += tr.series(ax.x[ok], v[ok], name, color, "y",
-                              None if hi is None else v[ok], None if hi is None else hi[ok])
+                              None if hi is None else v[ok], None if hi is None else hi[ok],
+                              outline=key == "linear")
         if nees_b:
             shapes += [tr.hline(b, "y", tr.COLORS["paper"], "dash") for b in nees_b]
     base = len(panels)
@@ -188,9 +190,12 @@ def consistency(c: dict, ax: Axis, summary: dict) -> Plot | None:
     if not panels:
         return None
     layout = _layout(panels, ax, 190, shapes)
-    for k in layout:
-        if k.startswith("yaxis"):
-            layout[k]["type"] = "log"
+    for i, k in enumerate(sorted((k for k in layout if k.startswith("yaxis")),
+                                 key=lambda k: int(k[5:] or 1))):
+        # Decades only (minor labels crowd), over what the bounds are about: an
+        # update's NIS reaches 1e-12 where its residual is tiny; autoscale shows it.
+        nees = i == 0 and "nees_real" in c
+        layout[k].update(type="log", dtick=1, range=[-2, 2] if nees else [-5, 1.5])
     caption = ("Normalized estimation error squared (every 10th sample) and normalized "
                "innovation squared per update, on log scales; red dashed: the χ² 2.5% and "
                "97.5% points for one sample (9 and 1 degrees of freedom).")

@@ -20,7 +20,8 @@ import numpy as np
 MAX_POINTS = 3000        # per trace: two days' 2,700 rows as they are; a year's 493,000
                          # rows in bins of 165
 COLORS = {"real": "#1f5fa8", "linear": "#e07b00", "ekf": "#2a9d3a", "smoothed": "#7a3fb0",
-          "sigma": "#555555", "truth": "#111111", "paper": "#b22222", "band": "#1f5fa8"}
+          "sigma": "#555555", "truth": "#111111", "paper": "#b22222", "band": "#1f5fa8",
+          "teal": "#0097a7"}
 SHADES = {"sun_gap": "rgba(255, 196, 0, 0.22)", "outage": "rgba(255, 196, 0, 0.09)",
           "eclipse": "rgba(60, 60, 140, 0.20)"}
 
@@ -106,10 +107,13 @@ def robust_range(values: list, x, skip_s: float, scale: float, pad: float = 1.12
 
 
 def series(x, y, name: str, color: str, yaxis: str = "y", low=None, high=None,
-           group: str | None = None, show: bool = True, mode: str = "lines") -> list[dict]:
+           group: str | None = None, show: bool = True, mode: str = "lines",
+           outline: bool = False) -> list[dict]:
     """One series as the page draws it: the row values as a line when they fit,
     with the full-rate extremes between rows (``low``, ``high``) as a faint band
-    behind them; beyond ``MAX_POINTS`` rows only the band of each bin's extremes."""
+    behind them; beyond ``MAX_POINTS`` rows only the band of each bin's extremes
+    (``outline``: its two edges as thin lines, for a series drawn over another's
+    band, where two fills would blend into a third colour)."""
     x = np.asarray(x, dtype=float)
     starts = bin_starts(len(x))
     if starts is None:
@@ -119,8 +123,12 @@ def series(x, y, name: str, color: str, yaxis: str = "y", low=None, high=None,
                         group=group, show=False)
         return out + [line(x, y, name, color, yaxis, group=group, show=show, mode=mode)]
     lo, hi = extremes(y, starts, low, high)
-    return band(x[starts], lo, hi, f"{name} (min–max per {_bin_label(x, starts)})", color,
-                yaxis, 0.55, group=group, show=show)
+    label = f"{name} (min–max per {_bin_label(x, starts)})"
+    if outline:
+        xs = x[starts]
+        return [line(np.concatenate([xs, [np.nan], xs]), np.concatenate([lo, [np.nan], hi]),
+                     label, color, yaxis, width=0.8, group=group, show=show)]
+    return band(x[starts], lo, hi, label, color, yaxis, 0.55, group=group, show=show)
 
 
 def sigma_band(x, sigma, yaxis: str, name: str = "±3σ (filter)", color: str = COLORS["sigma"],
@@ -149,7 +157,7 @@ def stacked_layout(panels: list[dict], x_title: str, height_per_panel: int = 210
     gap = 0.045 if n > 1 else 0.0
     h = (1.0 - gap * (n - 1)) / n
     layout = {"height": max(300, height_per_panel * n + 80),
-              "margin": {"l": 80, "r": 20, "t": 30, "b": 50},
+              "margin": {"l": 80, "r": 45, "t": 30, "b": 50},
               "hovermode": "x", "legend": {"orientation": "h", "y": 1.0, "yanchor": "bottom"},
               "xaxis": {"title": {"text": x_title}, "anchor": f"y{n if n > 1 else ''}",
                         "showline": True, "zeroline": False},
