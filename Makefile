@@ -31,7 +31,7 @@ test-vm: $(STAMP)
 		$(BIN)/python -m pytest
 
 demo: $(STAMP)
-	$(BIN)/dynprop run goes_next_equinox --out $(DEMO_DIR)
+	$(BIN)/dynprop run goes_next_equinox --out $(DEMO_DIR) --report
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py $(BENCH)

@@ -76,29 +76,83 @@ def _tree_memory_mb(proc) -> tuple[float, float]:
     return total / 2**20, largest / 2**20
 
 
-def run_365day() -> tuple[float, float, float, float]:
+def _watched(args: list[str], what: str) -> tuple[float, float, float]:
+    """Wall time of a command, the peak of the summed memory of its processes and the
+    largest single process's peak RSS (``_tree_memory_mb``, sampled every 0.2 s)."""
+    import psutil
+    start = time.perf_counter()
+    proc = psutil.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    total = largest = 0.0
+    while proc.poll() is None:
+        now = _tree_memory_mb(proc)
+        total, largest = max(total, now[0]), max(largest, now[1])
+        time.sleep(0.2)
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise RuntimeError(f"{what} failed (exit {proc.returncode})")
+    return wall, total, largest
+
+
+def run_365day(out: Path | None = None) -> tuple[float, float, float, float]:
     """`dynprop run goes_next_equinox` over one year with the default output section:
     wall time, the peak of the summed memory of its processes and the largest single
-    process's peak RSS (``_tree_memory_mb``, sampled every 0.2 s), and the size of
-    the run directory."""
-    import psutil
+    process's peak RSS, and the size of the run directory (kept at ``out`` if given,
+    for report_figures)."""
     exe = str(Path(sys.executable).with_name("dynprop"))
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "run"
-        start = time.perf_counter()
-        proc = psutil.Popen([exe, "run", "goes_next_equinox", "--duration-s", str(365 * DAY),
-                             "--out", str(out)], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-        total = largest = 0.0
-        while proc.poll() is None:
-            now = _tree_memory_mb(proc)
-            total, largest = max(total, now[0]), max(largest, now[1])
-            time.sleep(0.2)
-        wall = time.perf_counter() - start
-        if proc.returncode != 0:
-            raise RuntimeError(f"the one-year run failed (exit {proc.returncode})")
+        out = out or Path(tmp) / "run"
+        wall, total, largest = _watched([exe, "run", "goes_next_equinox", "--duration-s",
+                                         str(365 * DAY), "--out", str(out)],
+                                        "the one-year run")
         size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) / 1e6
     return wall, total, largest, size
+
+
+def report_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
+    """Issue 32: `dynprop report` as a user runs it (the whole command, start-up
+    included) on the default two-day run (median of 5; target ≤ 2 s) and on a year's
+    run (``year``: one made by run_365day; else $BENCH_YEAR_DIR, else a new one, 2
+    minutes): its wall time, peak memory and page size (≤ 20 MB); and, with
+    chromium installed, the year page's own opening time in the browser, from
+    navigation start to every figure drawn (median of 3; target ≤ 3 s)."""
+    exe = str(Path(sys.executable).with_name("dynprop"))
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        run = Path(tmp) / "run"
+        subprocess.run([exe, "run", "goes_next_equinox", "--out", str(run)], check=True,
+                       capture_output=True)
+        out.append(("report_2day_s", median_time(lambda: subprocess.run(
+            [exe, "report", str(run)], check=True, capture_output=True), repeats=5), "s"))
+        if year is None and os.environ.get("BENCH_YEAR_DIR"):
+            year = Path(os.environ["BENCH_YEAR_DIR"])
+        if year is None:
+            year = Path(tmp) / "year"
+            run_365day(year)
+        subprocess.run([exe, "report", str(year)], check=True, capture_output=True)  # warm
+        wall, total, _ = _watched([exe, "report", str(year)], "the year's report")
+        page = year / "report.html"
+        out += [("report_year_s", wall, "s"), ("report_year_peak_rss_MB", total, "MB"),
+                ("report_year_MB", page.stat().st_size / 1e6, "MB")]
+        opened = _page_open_s(page)
+        if opened is not None:
+            out.append(("report_year_open_s", opened, "s"))
+    return out
+
+
+def _page_open_s(page: Path) -> float | None:
+    """The page's own opening time in headless Chromium, through the browser test's
+    helper (tests/scenarios/browser.py): navigation start to every figure drawn, the
+    median of 3 opens after a warm-up; None without chromium."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from tests.scenarios.browser import Browser
+    try:
+        browser = Browser()
+    except BaseException as exc:   # pytest's skip: chromium, its driver or selenium missing
+        print(f"bench note: report_year_open_s not measured: {exc}", flush=True)
+        return None
+    with browser:
+        browser.open(page)
+        return statistics.median(browser.open(page).drawn_ms / 1000 for _ in range(3))
 
 
 YEAR_FIGURES = (("run_365day_wall_s", "s"), ("run_365day_peak_rss_MB", "MB"),
@@ -247,7 +301,7 @@ def main() -> None:
     if only:
         # `python benchmarks/run.py discretize_ms run_figures_2day_s`: just those.
         for name in only:
-            if name in ("tune_figures", "batch_figures"):
+            if name in ("tune_figures", "batch_figures", "report_figures"):
                 for key, value, unit in globals()[name]():
                     report(key, value, unit)
                 continue
@@ -299,15 +353,23 @@ def main() -> None:
     report("ekf_s_per_day", ekf_s, "s")
     report("ekf_over_filter", ekf_over_filter(), "x")
     report("run_2day_wall_s", cli_wall_s("run", "goes_next_equinox"), "s")
-    # Issue 14: a year in one run, streamed (skipped with BENCH_QUICK=1).
+    # Issue 14: a year in one run, streamed (skipped with BENCH_QUICK=1); kept for the
+    # year's review page (issue 32).
+    year_dir = tempfile.TemporaryDirectory()
+    year = None
     if os.environ.get("BENCH_QUICK") != "1":
-        for (key, unit), value in zip(YEAR_FIGURES, run_365day(), strict=True):
+        year = Path(year_dir.name) / "year"
+        for (key, unit), value in zip(YEAR_FIGURES, run_365day(year), strict=True):
             report(key, value, unit)
     report("run_figures_2day_s", run_figures_2day_s(), "s")
     for key, value, unit in tune_figures():
         report(key, value, unit)
     for key, value, unit in batch_figures():
         report(key, value, unit)
+    if year is not None:
+        for key, value, unit in report_figures(year):
+            report(key, value, unit)
+    year_dir.cleanup()
     k = 5000  # the plain-numpy loop, for comparison, scaled to a day
     part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,
                         1.5e-7)
