@@ -141,13 +141,13 @@ def estimates(c: dict, ax: Axis) -> Plot:
     for i, n in enumerate(("yaw", "roll", "h")):
         y, col = tr.axis(i), STATE[n]
         est, s = c["x_real"][:, col], 3 * c["sigma"][:, col]
-        panels.append({"title": f"{n} ({UNITS[n]})"})
+        panels.append({"title": f"{n} ({UNITS[n]})", "range": _range(ax, est + s, est - s)})
+        data += tr.series(ax.x, est + s, "estimate ± 3σ", tr.COLORS["sigma"], y,
+                          group="sig", show=i == 0, outline=True)
+        data += tr.series(ax.x, est - s, "estimate ± 3σ", tr.COLORS["sigma"], y,
+                          group="sig", show=False, outline=True)
         data += tr.series(ax.x, est, "estimate", tr.COLORS["real"], y, group="est",
                           show=i == 0)
-        data += tr.series(ax.x, est + s, "estimate ± 3σ", tr.COLORS["sigma"], y,
-                          group="sig", show=i == 0)
-        data += tr.series(ax.x, est - s, "estimate ± 3σ", tr.COLORS["sigma"], y,
-                          group="sig", show=False)
     return Plot("errors", "Estimates (no truth)", "The filter's estimates and their ±3σ.",
                 {"data": data, "layout": _layout(panels, ax)})
 
