@@ -186,9 +186,8 @@ def resolved_yaml(scenario: Scenario) -> str:
     back to the same scenario.  The exceptions: ``environment.disturbance``,
     ``telemetry``, ``batch``, ``report``, ``estimator.bias_states`` and the outlier keys
     (``_LATER_KEYS``) are written only when they differ from their defaults, so that a
-    scenario without
-    them resolves to the very text it did before they existed (its run directories,
-    and the digest that resumes a Monte Carlo set, unchanged)."""
+    scenario without them resolves to the very text it did before they existed (its run
+    directories, and the digest that resumes a Monte Carlo set, unchanged)."""
     data = scenario.model_dump(mode="json")
     if scenario.environment.disturbance == Disturbance():
         del data["environment"]["disturbance"]
