@@ -207,3 +207,19 @@ def shadow_factor(r_sat_m, sun_unit, sun_dist_m, model="conical"):
         out[near] = _conical(r_sat[near], s_hat[near], dist[near])
         return out
     raise ValueError(f"unknown shadow model {model!r}; expected 'conical' or 'cylindrical'")
+
+
+_ARCSEC = np.pi / 648000.0
+
+
+def precession_matrix(jd):
+    """C_{MOD←EME2000} at Julian date(s) ``jd``: the IAU 1976 precession (Lieske 1977;
+    SOFA ``iauPmat76``), P = R3(−z) R2(θ) R3(−ζ), ~0.37° in 2026.  UTC stands in for TT
+    in the argument (< 1e-9 rad).  dynprop's N is the mean equator and equinox of date
+    (the GMST above), so P carries it to EME2000 (docs/conventions.md, "Frames")."""
+    from .frames import rot2, rot3
+    t = (np.asarray(jd, dtype=float) - JD_J2000) / 36525.0
+    zeta = (2306.2181 + (0.30188 + 0.017998 * t) * t) * t * _ARCSEC
+    z = (2306.2181 + (1.09468 + 0.018203 * t) * t) * t * _ARCSEC
+    theta = (2004.3109 + (-0.42665 - 0.041833 * t) * t) * t * _ARCSEC
+    return rot3(-z) @ rot2(theta) @ rot3(-zeta)
