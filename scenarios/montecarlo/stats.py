@@ -247,6 +247,14 @@ def untested_why(n: dict, converged_h: float) -> str:
             f"{converged_h:g} h: the last is at {n['last_point_h']:.3g} h")
 
 
+def nees_inside_needed(points: int) -> float:
+    """The share of grid points inside the averaged NEES's 95% bounds a consistent
+    filter reaches: 95% on average, so half of consistent ensembles score a little
+    less; allow 3 binomial standard deviations (counting the grid points as
+    independent, which makes the allowance a lower bound)."""
+    return 0.95 - 3 * np.sqrt(0.95 * 0.05 / max(1, points))
+
+
 def diagnose(n: dict, converged_h: float | None = None) -> str:
     """One sentence on where the averaged NEES sits and which states put it there
     (every state, grouped by ``per_state_test``); with the linear twin, whether the
@@ -258,13 +266,9 @@ def diagnose(n: dict, converged_h: float | None = None) -> str:
     lo, hi = n["per_state_bounds_95"]
     states = n["per_state_mean_after_convergence"]
     test = per_state_test(n)
-    # A consistent filter is inside 95% of the time on average, so half of consistent
-    # ensembles score a little less: allow 3 binomial standard deviations (counting
-    # the grid points as independent, which makes the allowance a lower bound).
-    scatter = 3 * np.sqrt(0.95 * 0.05 / max(1, n["points_after_convergence"]))
     if frac["inside"] >= 0.95:
         head = f"consistent: inside the bounds {100 * frac['inside']:.0f}% of the time"
-    elif frac["inside"] >= 0.95 - scatter:
+    elif frac["inside"] >= nees_inside_needed(n["points_after_convergence"]):
         head = (f"consistent within sampling scatter: inside the bounds "
                 f"{100 * frac['inside']:.1f}% of the time, just under 95%")
     elif frac["below"] > frac["above"]:

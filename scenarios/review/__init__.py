@@ -10,7 +10,8 @@ the requirement; ``run_page``: the page of a `run` or `estimate` directory;
 ``run_figures``: its figures; ``pages``: the pages of the other commands'
 directories; ``render``: the Jinja2 template and the atomic write.
 
-May import: ``config``, ``files``, the base modules and the estimator's published
-constants (the paper's σ_yaw).  Nothing that simulates or estimates, and none of
-the analysis rooms: a page shows what the files hold.
+May import: ``config``, ``files``, the base modules, the estimator's published
+constants (the paper's σ_yaw, the state indices) and the verdict rules the analyses
+wrote their records by (``montecarlo.stats.nees_inside_needed``).  Nothing that
+simulates or estimates: a page shows what the files hold.
 """

@@ -103,32 +103,16 @@ def lookup(data, key: str):
     return node
 
 
-def flatten(data: dict, prefix: str = "") -> list[tuple[str, object]]:
-    """Every scalar of a JSON tree with its key path, lists of scalars element by
-    element, in the file's order."""
-    out = []
-    for k, v in data.items():
-        path = _name(prefix, k)
-        if isinstance(v, dict):
-            out += flatten(v, path)
-        elif isinstance(v, list):
-            out += _flatten_list(v, path)
-        else:
-            out.append((path, v))
-    return out
-
-
-def _flatten_list(items: list, path: str) -> list[tuple[str, object]]:
-    out = []
-    for i, v in enumerate(items):
-        p = f"{path}[{i}]"
-        if isinstance(v, dict):
-            out += flatten(v, p)
-        elif isinstance(v, list):
-            out += _flatten_list(v, p)
-        else:
-            out.append((p, v))
-    return out
+def flatten(node, prefix: str = "") -> list[tuple[str, object]]:
+    """Every scalar of a JSON tree with its key path (lists element by element), in
+    the file's order."""
+    if isinstance(node, dict):
+        pairs = [(_name(prefix, k), v) for k, v in node.items()]
+    elif isinstance(node, list):
+        pairs = [(f"{prefix}[{i}]", v) for i, v in enumerate(node)]
+    else:
+        return [(prefix, node)]
+    return [item for path, v in pairs for item in flatten(v, path)]
 
 
 # Dicts keyed by a state's column name (roll_deg, …) whose values are ratios.

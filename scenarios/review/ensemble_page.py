@@ -11,11 +11,11 @@ against the requirement.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from dynprop.estimator.covariance import PAPER_SIGMA_YAW_DEG
+from scipy.stats import binom
 
+from ..montecarlo.stats import nees_inside_needed
 from . import ensemble_figures as figs
 from .cells import Table, cell, text
 from .page_parts import closing, finite, record_table, verdict
@@ -36,16 +36,11 @@ CASE_FIGURES = ("roll_error_rms_deg", "yaw_error_rms_deg", "h_error_rms_Nms",
 OWN_TABLES = ("nees", "gap_end_yaw", "rms_after_convergence", "dispersions", "ekf")
 
 
-def _binomial_tail(k: int, n: int, p: float) -> float:
-    """P(X ≥ k) for X ~ Binomial(n, p)."""
-    return 1.0 - sum(math.comb(n, i) * p ** i * (1 - p) ** (n - i) for i in range(k))
-
-
 def nees_verdict(mc: dict):
     """Met when the averaged NEES after convergence is inside its 95% bounds 95% of
     the time, less three binomial standard deviations of sampling scatter (the
     allowance montecarlo's own diagnosis makes, its "consistent within sampling
-    scatter")."""
+    scatter": ``montecarlo.stats.nees_inside_needed``)."""
     n = mc.get("nees") or {}
     frac = n.get("fraction_after_convergence")
     label = "Averaged NEES"
@@ -56,7 +51,7 @@ def nees_verdict(mc: dict):
         head = [] if str(n.get("diagnosis")).startswith("not tested") else [text("not tested: ")]
         return verdict(label, None, head + why)
     points = n.get("points_after_convergence") or 0
-    need = 0.95 - 3 * math.sqrt(0.95 * 0.05 / max(1, points))
+    need = nees_inside_needed(points)
     lo, hi = n["bounds_95"]
     parts = [text("inside its χ²(9N)/N 95% bounds ["), cell(lo, MC, "nees.bounds_95[0]"),
              text(", "), cell(hi, MC, "nees.bounds_95[1]"), text("] a fraction "),
@@ -80,7 +75,7 @@ def filter_verdict(gaps: list[dict], label: str, prefix: str):
     parts, ok = [text("cases whose gap-end yaw error is beyond ±3σ of their own filter σ: ")], True
     for m, (j, g) in enumerate(judged):
         beyond = round((1 - g["fraction_within"]["3sigma"]) * g["n"])
-        tail = _binomial_tail(beyond, g["n"], P_BEYOND_3SIGMA)
+        tail = float(binom.sf(beyond - 1, g["n"], P_BEYOND_3SIGMA))   # P(X ≥ beyond)
         ok &= tail >= TAIL
         parts += [text(f"{'; ' if m else ''}gap {g.get('gap', j + 1)}: "), cell(beyond),
                   text(" of "), cell(g["n"], MC, f"{prefix}gap_end_yaw[{j}].n"),

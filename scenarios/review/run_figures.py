@@ -12,12 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from dynprop.estimator import model as em
 
 from . import traces as tr
 
-# comparison.npz's nine columns (estimate.csv's order): roll, roll rate, yaw, yaw
-# rate, h, N_px, N_pz, N_cx, N_cz.
-STATE = {"roll": 0, "yaw": 2, "h": 4, "N_px": 5, "N_pz": 6, "N_cx": 7, "N_cz": 8}
+# comparison.npz's columns: the model's state indices (estimator.model), as
+# figures.run's COLUMNS.
+STATE = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
+         "N_cx": em.NCX, "N_cz": em.NCZ}
 UNITS = {"roll": "deg", "yaw": "deg", "h": "N m s"}
 TORQUES = ("N_px", "N_pz", "N_cx", "N_cz")
 TORQUE_MEANING = {"N_px": "periodic roll (x)", "N_pz": "periodic yaw (z)",
