@@ -133,9 +133,14 @@ def requirement_of(scenario: dict, override: float | None) -> float | None:
 
 
 def build(src: Source, command: str | None, requirement_deg: float | None = None) -> Page:
+    # Read key by key as the figures ask (an array is read again when asked again):
+    # the whole file at once would hold a year's 274 MB in memory.
+    with np.load(src.path / "comparison.npz") as c:
+        return _build(src, command, requirement_deg, c)
+
+
+def _build(src: Source, command: str | None, requirement_deg: float | None, c) -> Page:
     summary, scenario, path = src.record, src.scenario or {}, src.path
-    with np.load(path / "comparison.npz") as npz:
-        c = {k: npz[k] for k in npz.files}
     daily = _daily(path)
     duration = float(summary.get("duration_s") or (c["t_s"][-1] - c["t_s"][0]))
     min_gap_h = float((scenario.get("estimator") or {}).get("sun_gap_min_h", 4.0))
