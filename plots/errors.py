@@ -297,7 +297,8 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
                 paper_sigma_deg: float, paper_sigma_label: str | None = None,
                 gap_labels: tuple[str, str] | None = None, warnings=None):
     """Estimation error vs time for roll, yaw and h, and beneath each real −
-    linearized (with the twin) and EKF − paper filter (with the EKF).
+    linearized (with the twin) and EKF − paper filter (with the EKF); and pitch (the
+    Eq. 3b filter's, a series of its own) when given.
 
     ``series[name]`` = {"unit": "deg" | "N m s", "real": estimate − nonlinear truth,
     "sigma": filter 1σ, "style": "envelope" (noisy: dots and ±RMS per interval) or
@@ -316,7 +317,7 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
     t_s = f64(t_s)
     t_h = t_s / 3600.0
     gap = np.asarray(gap, dtype=bool)
-    names = [n for n in ("roll", "yaw", "h") if n in series]
+    names = [n for n in ("roll", "yaw", "h", "pitch") if n in series]
 
     def kinds(s):
         yield "error"
@@ -350,13 +351,13 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
 def plot_estimates(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
                    paper_sigma_deg: float, paper_sigma_label: str | None = None,
                    gap_labels: tuple[str, str] | None = None, warnings=None):
-    """Without a truth: the estimates of roll, yaw and h with the filter's ±3σ about
-    them.  ``series[name]`` = {"unit", "estimate", "sigma"}; the other arguments as
-    ``plot_errors``."""
+    """Without a truth: the estimates of roll, yaw, h (and pitch when given) with the
+    filter's ±3σ about them.  ``series[name]`` = {"unit", "estimate", "sigma"}; the
+    other arguments as ``plot_errors``."""
     t_s = f64(t_s)
     t_h = t_s / 3600.0
     gap = np.asarray(gap, dtype=bool)
-    names = [n for n in ("roll", "yaw", "h") if n in series]
+    names = [n for n in ("roll", "yaw", "h", "pitch") if n in series]
     fig, axes = panel_figure([3.0] * len(names), warnings, 1.0, 1.6)
     ends = gap_ends(t_s, gap, min_gap_s)
     shade = _shader(t_s, t_h, gap, min_gap_s, gap_labels)

@@ -58,9 +58,10 @@ class FilterHistory:
 class TruthWindow:
     """A window's truth and telemetry, as the producer hands it on: samples
     [start, stop) at times ``t_s``, the telemetry the filter reads (``measured``;
-    the Earth sensor's pitch for the EKF, else None), telemetry.csv's columns at
-    the output rows, the truth in the model's states, the shadow factor and the
-    true 3-1-2 angles (yaw, roll, pitch) at the output rows."""
+    the Earth sensor's pitch, which the pitch filter and the EKF read), telemetry.csv's
+    columns at the output rows, the truth in the model's states and in the pitch
+    filter's (θ, θ̇, N_y), the shadow factor and the true 3-1-2 angles (yaw, roll,
+    pitch) at the output rows."""
 
     index: int
     start: int
@@ -70,6 +71,7 @@ class TruthWindow:
     pitch_rad: np.ndarray | None
     tel_rows: dict[str, np.ndarray]
     truth_model: np.ndarray
+    pitch_truth: np.ndarray
     shadow: np.ndarray
     euler_rows: np.ndarray
 
@@ -90,13 +92,15 @@ class Window(TruthWindow):
     """A window once everything is through it: the truth window, the paper's filter
     on the real telemetry (``real``, with its NEES on the NEES samples), its RTS
     smoothed estimate (None when not smoothed), the filters beside the paper's by
-    name (``estimator.filters``), and the linear twin with its filter."""
+    name (``estimator.filters``), the pitch filter (``run.pitch.PitchHistory``), and
+    the linear twin with its filter."""
 
     params: ModelParams                   # the paper filter's model
     real: FilterHistory
     nees_real: np.ndarray
     smoothed_x: np.ndarray | None
     filters: dict[str, FilterHistory]
+    pitch: object
     twin_model: np.ndarray
     linear: FilterHistory
     nees_linear: np.ndarray

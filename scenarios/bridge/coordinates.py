@@ -72,3 +72,11 @@ def model_truth(params: em.ModelParams, truth, tt: TruthTorques, rows=slice(None
     only the samples ``rows``."""
     return np.column_stack([*_attitude_columns(truth, tt.rates, params.omega_n_radps, rows),
                             tt.torque_states[rows]])
+
+
+def pitch_truth(truth, tt: TruthTorques, rows=slice(None)) -> np.ndarray:
+    """The truth in the pitch filter's states (Eq. 3b, ``estimator.pitch``): the 3-1-2
+    pitch θ, its Euler rate θ̇ and the external pitch torque N_y (every source the
+    truth flies; the gravity gradient is the model's k θ), (N, 3)."""
+    return np.column_stack([truth.euler_rad[rows, 2], tt.rates[rows, 2],
+                            external_torque(truth)[rows, 1]])

@@ -127,6 +127,9 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float, scenario: dict,
     if "err_real" not in c:
         series = {n: {"unit": UNITS[n], "estimate": c["x_real"][:, COLUMNS[n]],
                       "sigma": c["sigma"][:, COLUMNS[n]]} for n in UNITS}
+        if "x_pitch" in c:
+            series["pitch"] = {"unit": "deg", "estimate": c["x_pitch"][:, 0],
+                               "sigma": c["sigma_pitch"][:, 0]}
         return plot_estimates, (c["t_s"], gap, series, title, min_gap_s), kwargs
     series = {}
     for j, n in enumerate(UNITS):
@@ -152,6 +155,14 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float, scenario: dict,
         if n == "yaw":
             s["reference"] = (eq55, "σ_yaw, Eq. 55")
         series[n] = s
+    if "err_pitch" in c:
+        # The pitch filter's (Eq. 3b): its own panel, no twin or EKF beside it.
+        s = {"unit": "deg", "real": c["err_pitch"][:, 0], "sigma": c["sigma_pitch"][:, 0],
+             "style": "envelope"}
+        if "err_pitch_max" in c:
+            s.update(real_min=c["err_pitch_min"][:, 0], real_max=c["err_pitch_max"][:, 0],
+                     row_interval=float(c["output_interval_s"]))
+        series["pitch"] = s
     return plot_errors, (c["t_s"], gap, series, title, min_gap_s), kwargs
 
 

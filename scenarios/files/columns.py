@@ -35,6 +35,19 @@ def estimate_columns(t_s, x, sigma, omega_n: float) -> dict[str, np.ndarray]:
     return cols
 
 
+# The pitch filter's states (Eq. 3b, ``estimator.pitch``): θ, θ̇, N_y, from rad,
+# rad/s and N m.
+PITCH_COLUMNS = ("pitch_deg", "pitch_rate_degps", "N_y_Nm")
+PITCH_FACTORS = np.array([RAD2DEG, RAD2DEG, 1.0])
+
+
+def pitch_columns(x, sigma) -> dict[str, np.ndarray]:
+    """estimate.csv's pitch columns: the pitch filter's 3 states and their 1σ."""
+    cols = {name: x[:, k] * PITCH_FACTORS[k] for k, name in enumerate(PITCH_COLUMNS)}
+    return cols | {f"sigma_{name}": sigma[:, k] * PITCH_FACTORS[k]
+                   for k, name in enumerate(PITCH_COLUMNS)}
+
+
 def truth_columns(result, sun_visible: np.ndarray, rows: np.ndarray | None = None
                   ) -> dict[str, np.ndarray]:
     """``w{x,y,z}_radps`` is ω_BN in body axes (what a gyro reads).  ``sun_visible`` is

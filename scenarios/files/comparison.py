@@ -18,6 +18,10 @@ display units: deg, deg/s, N m s, N m; written only when their inputs exist):
   too ``err_real_minus_linear`` (N, 3) roll (deg), yaw (deg), h (N m s) real −
   linearized error, differenced in float64 before the float32 rounding (for h
   the difference, ~1e-13 N m s, is below the float32 resolution of the errors);
+- with the pitch filter (``run.pitch``): ``x_pitch`` and ``sigma_pitch`` (N, 3) its
+  estimate and 1σ (pitch deg, pitch rate deg/s, N_y N m), ``nis_pitch`` (N); with a
+  truth ``err_pitch`` (N, 3) and ``nees_pitch`` (N, 3-state NEES, NaN between its
+  samples, which are the 9-state NEES's);
 - with the telemetry: ``tel_roll_deg``, ``tel_pitch_deg``, ``tel_yaw_deg`` (deg,
   NaN where absent), ``tel_yaw_sigma_deg`` (deg, a-priori 1σ of the ground yaw),
   ``tel_sun_head`` (0 dss, 1 cass1, 2 cass2, NaN none), ``tel_wheelK_rpm`` (rpm).
@@ -32,7 +36,7 @@ from dynprop.estimator.consistency import nis
 from dynprop.estimator.model import H_WHEEL, R, Y
 
 from ..units import RAD2DEG
-from .columns import display_factors
+from .columns import PITCH_FACTORS, display_factors
 
 #: telemetry.csv columns the telemetry figure draws (besides every wheelK_rpm).
 TELEMETRY_COLUMNS = ("roll_deg", "pitch_deg", "yaw_deg", "yaw_sigma_deg", "sun_head")
@@ -53,6 +57,20 @@ def _telemetry_arrays(telemetry: dict, n: int) -> dict[str, np.ndarray]:
 
 
 @dataclass(frozen=True)
+class PitchRows:
+    """The pitch filter on the rows: x, σ (N, 3, rad, rad/s, N m), innovations and
+    their variances; with a truth, its pitch states (N, 3) and the 3-state NEES at the
+    NEES indices of ``comparison_arrays``'s ``nees_data``."""
+
+    x: np.ndarray
+    sigma: np.ndarray
+    innovations: np.ndarray
+    innovation_var: np.ndarray
+    truth: np.ndarray | None = None
+    nees: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class ComparisonInputs:
     """What comparison.npz is drawn from, on its rows (model coordinates, rad): the
     paper filter's history ``real`` (x, sigma, innovations, innovation_var) and the
@@ -69,6 +87,7 @@ class ComparisonInputs:
     twin_model: np.ndarray | None = None
     true_euler_rad: np.ndarray | None = None
     filters: dict = field(default_factory=dict)
+    pitch: PitchRows | None = None
 
 
 def comparison_arrays(c: ComparisonInputs, t_s, yaw_present, nees_data,
@@ -107,6 +126,16 @@ def comparison_arrays(c: ComparisonInputs, t_s, yaw_present, nees_data,
             series = np.full(n, np.nan)
             series[idx] = values
             out[key] = series
+    if c.pitch is not None:
+        p = c.pitch
+        out.update(x_pitch=p.x * PITCH_FACTORS, sigma_pitch=p.sigma * PITCH_FACTORS,
+                   nis_pitch=p.innovations**2 / p.innovation_var)
+        if p.truth is not None:
+            out["err_pitch"] = (p.x - p.truth) * PITCH_FACTORS
+        if p.nees is not None:
+            series = np.full(n, np.nan)
+            series[idx] = p.nees
+            out["nees_pitch"] = series
     if c.true_euler_rad is not None:
         out["true_euler_deg"] = c.true_euler_rad * RAD2DEG  # yaw, roll, pitch
     if telemetry is not None:

@@ -24,8 +24,8 @@ import numpy as np
 
 from ..records import FilterHistory, Window
 from ..samples import output_rows
-from .columns import display_factors
-from .comparison import DIFF_STATES, ComparisonInputs, comparison_arrays
+from .columns import PITCH_FACTORS, display_factors
+from .comparison import DIFF_STATES, ComparisonInputs, PitchRows, comparison_arrays
 
 DIFF_COLS = list(DIFF_STATES)
 
@@ -33,6 +33,15 @@ DIFF_COLS = list(DIFF_STATES)
 def _at(h: FilterHistory, k) -> FilterHistory:
     return FilterHistory(h.x[k], None if h.sigma is None else h.sigma[k], h.innovations[k],
                          h.innovation_var[k], h.backend)
+
+
+def _pitch_at(w: Window, k, pick) -> PitchRows | None:
+    p = w.pitch
+    if p is None:
+        return None
+    return PitchRows(p.x[k], p.sigma[k], p.innovations[k], p.innovation_var[k],
+                     None if p.nees is None else w.pitch_truth[k],
+                     None if p.nees is None else p.nees[pick])
 
 
 class ComparisonRows:
@@ -79,7 +88,8 @@ class ComparisonRows:
             w.params.omega_n_radps, _at(w.real, k), truth_model=w.truth_model[k],
             smoothed_x=None if w.smoothed_x is None else w.smoothed_x[k],
             linear_x=w.linear.x[k], twin_model=w.twin_model[k], true_euler_rad=w.euler_rows,
-            filters={name: _at(h, k) for name, h in w.filters.items()})
+            filters={name: _at(h, k) for name, h in w.filters.items()},
+            pitch=_pitch_at(w, k, pick))
         present = np.isfinite(w.measured.yaw_rad[k])
         nees_data = (np.flatnonzero(at_nees), w.nees_real[pick], w.nees_linear[pick])
         arrays = comparison_arrays(c, w.t_s[k], present, nees_data, w.tel_rows)
@@ -109,6 +119,10 @@ class ComparisonRows:
         if w.smoothed_x is not None:
             series["err_smoothed"] = (samples, w.smoothed_x - w.truth_model, f)
         series["nees_real"] = (nees_idx, w.nees_real, None)
+        p = w.pitch
+        if p is not None and p.nees is not None:
+            series["err_pitch"] = (samples, p.x - w.pitch_truth, PITCH_FACTORS)
+            series["nees_pitch"] = (nees_idx, p.nees, None)
         for key, (idx, v, scale) in series.items():
             if len(idx) == 0:
                 continue

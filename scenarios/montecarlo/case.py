@@ -18,10 +18,11 @@ from dynprop.estimator.augmented import unpack as aug_unpack
 from dynprop.estimator.consistency import nees
 from dynprop.estimator.kalman import unpack
 from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
+from dynprop.estimator.pitch import unpack as pitch_unpack
 
 from ..config import build
 from ..config.schema import Scenario
-from ..files.columns import display_factors, telemetry_columns
+from ..files.columns import PITCH_FACTORS, display_factors, telemetry_columns
 from ..run.ekf import other_filters
 from ..run.filtering import BiasedResult, design_of, filter_section
 from ..run.simulate import simulate
@@ -109,6 +110,10 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
         record["nees_mean_linear"] = nees_mean_lin
         arrays["err_linear"] = (err_l[on_grid] * f).astype(np.float32)
         arrays["nees_linear"] = nees_lin.astype(np.float32)
+    if runs.pitch is not None:
+        record_p, arrays_p = _pitch_record(runs.pitch, runs.pitch_truth, grid, converged)
+        record.update(record_p)
+        arrays.update(arrays_p)
     for name, result in (extra or {}).items():
         err_e, sigma_e, nees_e, mean_e = against(result, runs.truth_model)
         record[f"yaw_error_{name}_at_gap_end_deg"] = [float(err_e[i, Y] * RAD2DEG)
@@ -121,6 +126,20 @@ def reduce_case(s: Scenario, runs, yaw_present: np.ndarray, case: int,
         arrays[f"sigma_{name}"] = (sigma_e[on_grid] * np.abs(f)).astype(np.float32)
         arrays[f"nees_{name}"] = nees_e.astype(np.float32)
     return record, arrays
+
+
+def _pitch_record(p, truth, grid, converged) -> tuple[dict, dict[str, np.ndarray]]:
+    """The pitch filter's part of a case (``run.pitch``; its history holds every
+    sample): pitch error RMS and 3-state NEES on the grid, kept apart from the
+    9-state figures."""
+    err = p.x[grid] - truth[grid]
+    values = nees(p.x[grid], pitch_unpack(p.P_packed[grid]), truth[grid])
+    record = {"pitch_error_rms_deg": _rms(err[:, 0]) * RAD2DEG,
+              "nees_mean_pitch": float(np.mean(values[converged])) if converged.any()
+              else None}
+    return record, {"err_pitch": (err * PITCH_FACTORS).astype(np.float32),
+                    "sigma_pitch": (p.sigma[grid] * PITCH_FACTORS).astype(np.float32),
+                    "nees_pitch": values.astype(np.float32)}
 
 
 def _bias_record(s: Scenario, real, truth_model, rows, full: bool, on_grid, converged,

@@ -17,7 +17,7 @@ import numpy as np
 from ..config import build
 from ..config.schema import Scenario, resolved_yaml
 from ..files.checks import add_checks
-from ..files.columns import estimate_columns
+from ..files.columns import estimate_columns, pitch_columns
 from ..files.comparison import comparison_arrays
 from ..files.csvio import BackgroundWriter
 from ..files.simulation import write_simulation
@@ -31,6 +31,7 @@ from ..run.filtering import (
     final_biases,
     rejected_counts,
 )
+from ..run.pitch import pitch_summary
 from ..run.simulate import simulate
 from ..run.statistics import nees_series, whole_run_statistics
 from ..run.whole import run_scenario
@@ -83,7 +84,8 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
     present = np.isfinite(written["yaw_deg"])
     in_background(stage / "estimate.csv",
                   estimate_columns(t, runs.real.x, runs.real.sigma, runs.params.omega_n_radps)
-                  | bias_columns(runs.real, slice(None)))
+                  | bias_columns(runs.real, slice(None))
+                  | pitch_columns(runs.pitch.x, runs.pitch.sigma))
     for name, r in extra.items():
         in_background(stage / f"estimate_{name}.csv",
                       estimate_columns(t, r.x, r.sigma, runs.params.omega_n_radps))
@@ -99,6 +101,7 @@ def _estimate_and_report(s: Scenario, runs, written, stage: Path, in_background,
                                   truth_biases))
     for name, r in extra.items():
         summary[name] = filter_summary(s, name, r, runs.truth_model, t, present)
+    summary["pitch"] = pitch_summary(s, runs.pitch, t - t[0], runs.pitch_truth)
     # summary.json before the figures, which draw its verdicts and warnings; written
     # again, complete, when the case is done.
     write_summary(stage / "summary.json", add_checks(summary))

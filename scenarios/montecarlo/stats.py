@@ -25,7 +25,7 @@ from scipy import stats as sps
 from .. import __version__
 from ..config.build import estimator_model
 from ..config.schema import Scenario
-from ..files.columns import STATE_COLUMNS
+from ..files.columns import PITCH_COLUMNS, STATE_COLUMNS
 from ..files.summary import eq55_sigma_yaw_deg
 
 # |e| quantiles that a Gaussian puts at 1σ, 2σ and 3σ (the keys of montecarlo.json
@@ -119,6 +119,23 @@ def _other_filter(name: str, mean: dict, conv, bounds, wanted: dict, ok: list, n
     return out
 
 
+def _pitch_section(mean: dict, conv, m: int, fig: dict) -> dict:
+    """montecarlo.json's ``pitch``: the pitch filter's (``run.pitch``) averaged 3-state
+    NEES against χ²(3) bounds for the ``m`` cases, and its ensemble RMS and σ after
+    convergence, apart from the 9-state figures."""
+    nees_avg = mean["nees_pitch"]
+    bounds = chi2_bounds(3, m)
+    fig["rms_pitch"] = np.sqrt(mean["err2_pitch"])
+    fig["nees_avg_pitch"] = nees_avg
+    return {"nees": {"dof": 3, "bounds_95": list(bounds),
+                     "mean_after_convergence": _mean(nees_avg[conv]),
+                     "fraction_after_convergence": _fraction(nees_avg[conv], *bounds)},
+            "rms_after_convergence": {
+                col: {"ensemble_rms": _root(_mean(mean["err2_pitch"][conv, k])),
+                      "filter_sigma_rms": _root(_mean(mean["sig2_pitch"][conv, k]))}
+                for k, col in enumerate(PITCH_COLUMNS)}}
+
+
 def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
              command: str) -> tuple[dict, dict[str, np.ndarray]]:
     """montecarlo.json and the arrays the figures are drawn from (montecarlo.npz)."""
@@ -138,7 +155,7 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
     # Running sums over the cases, one case in memory at a time: a set of thousands
     # of two-day cases never holds its grids all at once.
     sums: dict[str, np.ndarray] = {}
-    linear = True
+    linear = pitch = True
     others = [f for f in s.estimator.filters if f != "paper"]
     for k in ok:
         a = load_arrays(k)
@@ -149,6 +166,12 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
         if linear:
             terms["err2_linear"] = a["err_linear"].astype(float) ** 2
             terms["nees_linear"] = a["nees_linear"].astype(float)
+        # A set resumed from cases run before the pitch filter has none of its arrays.
+        pitch = pitch and "err_pitch" in a
+        if pitch:
+            terms["err2_pitch"] = a["err_pitch"].astype(float) ** 2
+            terms["sig2_pitch"] = a["sigma_pitch"].astype(float) ** 2
+            terms["nees_pitch"] = a["nees_pitch"].astype(float)
         for name in others:
             if f"err_{name}" not in a:
                 raise ValueError(f"case {k} has no {name} arrays: it was run without that "
@@ -212,6 +235,7 @@ def ensemble(s: Scenario, records: dict[int, dict], load_arrays, n_runs: int,
             fig[f"gap{j + 1}_yaw_error_linear_deg"] = el
         gaps.append(g)
     summary["gap_end_yaw"] = gaps
+    summary["pitch"] = _pitch_section(mean, conv, m, fig) if pitch else None
     for name in others:
         summary[name] = _other_filter(name, mean, conv, bounds, wanted, ok, n_gaps, fig)
     summary["nees"]["per_state_test_95"] = per_state_test(summary["nees"])

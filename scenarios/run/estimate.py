@@ -7,20 +7,23 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+from dynprop.estimator.consistency import nees
+from dynprop.estimator.pitch import unpack as pitch_unpack
 from dynprop.estimator.steps import StepTable
 from dynprop.estimator.transition import discretize
 
-from ..bridge.coordinates import model_truth, truth_torques
+from ..bridge.coordinates import model_truth, pitch_truth, truth_torques
 from ..bridge.inputs import telemetry_inputs
 from ..config import build
 from ..config.schema import Scenario, output_stride, resolved_yaml
 from ..files.checks import add_checks
-from ..files.columns import estimate_columns
-from ..files.comparison import comparison_arrays
+from ..files.columns import estimate_columns, pitch_columns
+from ..files.comparison import PitchRows, comparison_arrays
 from ..files.csvio import write_csv
 from ..files.summary import assemble_summary, write_summary
 from ..records import FilterHistory
 from ..samples import nees_rows, output_rows, sun_gaps, sun_gaps_at
+from ..units import DEG
 from .ekf import other_filters
 from .estimate_truth import comparison_at_rows, filter_row_summary, row_statistics
 from .filter_tally import FilterTally
@@ -32,6 +35,7 @@ from .filtering import (
     paper_smoother,
     rejected_counts,
 )
+from .pitch import PitchHistory, PitchTally, history_at, pitch_summary, run_pitch
 from .statistics import nees_series, whole_run_statistics
 from .whole import TwoRuns, filter_telemetry
 
@@ -94,13 +98,23 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
                                            t_s=None if grid.regular else t)
     smoothed = paper_smoother(design_of(s), real, disc, **smoother_args)
     sparse = truth is not None and not truth.every_sample(n)
-    truth_model = None
+    truth_model = p_truth = None
     if truth is not None:
         tt = truth_torques(truth, s.estimator.model_torques, params.omega0_radps)
         truth_model = model_truth(params, truth, tt)
+        p_truth = pitch_truth(truth, tt)
+    # The pitch filter (Eq. 3b) when the file has the Earth sensor's pitch.
+    pitch = None
+    if "pitch_deg" in grid.columns:
+        pitch = run_pitch(s, grid.columns["pitch_deg"] * DEG,
+                          telemetry_inputs(s, grid.columns).speeds_radps,
+                          None if grid.regular else t)
+    pitch_hist = (None if pitch is None else history_at(pitch, truth.rows, p_truth) if sparse
+                  else PitchHistory.of(pitch, p_truth, nees_rows(0, n), keep_P=True))
     runs = TwoRuns(None, None, params, truth_model, None, real, None, smoothed,
                    build.yaw_factors(s),
-                   true_euler_rad=None if truth is None else truth.euler_rad)
+                   true_euler_rad=None if truth is None else truth.euler_rad,
+                   pitch=None if sparse else pitch_hist, pitch_truth=None if sparse else p_truth)
     extra = other_filters(s, grid.columns, on_grid=grid.regular)
     (stage / "scenario.yaml").write_text(resolved_yaml(s))
     # The files at the output cadence, as `run` writes them (``samples.output_rows``).
@@ -111,7 +125,8 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     k = output_rows(0, n, stride)
     write_csv(stage / "estimate.csv",
               estimate_columns(t[k], real.x[k], real.sigma[k], params.omega_n_radps)
-              | bias_columns(real, k))
+              | bias_columns(real, k)
+              | ({} if pitch is None else pitch_columns(pitch.x[k], pitch.sigma[k])))
     for name, r in extra.items():
         write_csv(stage / f"estimate_{name}.csv",
                   estimate_columns(t[k], r.x[k], r.sigma[k], params.omega_n_radps))
@@ -125,7 +140,8 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
                                     present, nees_series(dataclasses.replace(
                                         runs, truth_model=None)), grid.regular)
         stats, ends, n_real = row_statistics(base, real, smoothed, truth_model, rows, t)
-        arrays = comparison_arrays(comparison_at_rows(runs, rows, extra), t[rows],
+        arrays = comparison_arrays(comparison_at_rows(runs, rows, extra, _sparse_pitch(
+                                       pitch_hist, p_truth)), t[rows],
                                    present[rows], (np.arange(len(rows)), n_real, None),
                                    {c: v[rows] for c, v in grid.columns.items()})
     else:
@@ -147,6 +163,14 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
         summary[name] = (filter_row_summary(name, r, truth_model, truth.rows, ends, t) if sparse
                          else filter_summary(s, name, r, truth_model, t, present,
                                            grid.regular))
+    if sparse and pitch_hist is not None:
+        # Its own figures at every sample, its errors where the truth has rows.
+        tally = PitchTally(s)
+        tally.add_own(PitchHistory.of(pitch, None, []), t - t[0])
+        tally.add_errors(pitch_hist, 0, t[truth.rows] - t[0], p_truth)
+        summary["pitch"] = tally.summary()
+    else:
+        summary["pitch"] = pitch_summary(s, pitch_hist, t - t[0], p_truth)
     # One key set for every summary: `run`'s output keys, for a file filtered row by row.
     summary.update(output_interval_s=stride * step_s, telemetry_written=None,
                    daily=None)
@@ -157,6 +181,17 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     from ..figures.run import plot_run_figures
     plot_run_figures(stage)
     return summary
+
+
+def _sparse_pitch(h: PitchHistory | None, truth) -> PitchRows | None:
+    """The pitch filter at a sparse truth's common rows for comparison.npz, its NEES at
+    every one of them (as the 9-state NEES is there)."""
+    if h is None:
+        return None
+    values = None
+    if truth is not None:
+        values = nees(h.x, pitch_unpack(h.P_packed), truth)
+    return PitchRows(h.x, h.sigma, h.innovations, h.innovation_var, truth, values)
 
 
 def gap_ends(gaps, n: int) -> list[int]:

@@ -117,10 +117,12 @@ def filter_row_summary(name: str, result, truth_model, rows, ends, t_s) -> dict:
     return out
 
 
-def comparison_at_rows(runs, rows: np.ndarray, filters: dict) -> ComparisonInputs:
+def comparison_at_rows(runs, rows: np.ndarray, filters: dict, pitch=None
+                       ) -> ComparisonInputs:
     """What comparison.npz is drawn from, at the common rows (a truth that is not at
-    every sample: the error series exist there only)."""
+    every sample: the error series exist there only); ``pitch`` the pitch filter's
+    ``PitchRows`` there."""
     return ComparisonInputs(
         runs.params.omega_n_radps, at_rows(runs.real, rows), runs.truth_model,
         None if runs.smoothed is None else runs.smoothed.x[rows], None, None,
-        runs.true_euler_rad, {k: at_rows(v, rows) for k, v in filters.items()})
+        runs.true_euler_rad, {k: at_rows(v, rows) for k, v in filters.items()}, pitch)

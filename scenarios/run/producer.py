@@ -25,7 +25,7 @@ from typing import Protocol
 from dynprop.estimator.transition import discretize
 from dynprop.sim.telemetry import sense_window
 
-from ..bridge.coordinates import TruthTorques, model_truth, truth_torques
+from ..bridge.coordinates import TruthTorques, model_truth, pitch_truth, truth_torques
 from ..bridge.inputs import telemetry_inputs
 from ..bridge.twin import TwinTruth, twin_window
 from ..config import build
@@ -80,7 +80,6 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 tags=UtcTags.of(s.epoch_utc, s.sample_interval_s))
     twin_filter = TwinFilter(s, params, disc, plan)
     loop = None if steering is None else steering.start(s, stream, out)
-    ekf = "ekf" in s.estimator.filters
     pending: _TwinPending | None = None
     twin_x = None
     unwritten: list = []     # file rows of windows whose twin is not yet handed on
@@ -111,10 +110,10 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                                   tel_cols))
                 real = TruthWindow(
                     index, a, b, truth.t_s, telemetry_inputs(s, tel_cols),
-                    # The EKF measures pitch as well (the Earth sensor's).
-                    tel_cols["pitch_deg"] * DEG if ekf else None,
+                    # The pitch filter and the EKF measure the Earth sensor's pitch.
+                    tel_cols["pitch_deg"] * DEG,
                     {k: v[rows] for k, v in tel_cols.items()}, model_truth(params, truth, tt),
-                    truth.shadow, truth.euler_rad[rows])
+                    pitch_truth(truth, tt), truth.shadow, truth.euler_rad[rows])
                 current = _TwinPending(index, a, TwinTruth.of(truth), tt, drawn)
                 del tel, truth
                 yield "real", real

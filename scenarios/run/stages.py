@@ -30,18 +30,20 @@ from .filtering import (
     paper_smoother,
     smoothed_full_x,
 )
+from .pitch import PitchHistory, PitchStream
 
 
 @dataclass(frozen=True)
 class Filtered:
     """A truth window through the paper's filter (and the EKF beside it when the
-    scenario asks), with the inputs its smoother needs."""
+    scenario asks), with the inputs its smoother needs, and through the pitch filter."""
 
     window: TruthWindow
     real: FilterResult
     u: np.ndarray
     extra: ExtraNoise | None
     ekf: EkfResult | None
+    pitch: object
 
 
 def filtered(s: Scenario, records):
@@ -55,6 +57,7 @@ def filtered(s: Scenario, records):
     prior = initial_prior(s, params)
     design = design_of(s)
     ekf = EkfStream(s, params) if "ekf" in s.estimator.filters else None
+    pitch = PitchStream(s)
     prev_tail, cur = None, next(records, None)
     while cur is not None:
         # The last window needs no look-ahead (and waiting for the stream's end would
@@ -66,9 +69,11 @@ def filtered(s: Scenario, records):
                               sun_head=cur.measured.sun_head)
         prior = (result.x_next, result.P_next)
         e = None if ekf is None else ekf.window(cur, nxt, plan.pad)
+        p = pitch.window(cur.pitch_rad, cur.measured.speeds_radps,
+                         None if nxt is None else nxt.measured.speeds_radps, plan.pad)
         # The next window's derivative needs only the last samples of this one.
         prev_tail = cur.measured.cut(slice(-plan.pad, None))
-        yield Filtered(cur, result, u, extra, e)
+        yield Filtered(cur, result, u, extra, e, p)
         cur = nxt
 
 
@@ -84,6 +89,7 @@ class Smoothed:
     nees_real: np.ndarray
     smoothed_x: np.ndarray | None
     filters: dict[str, FilterHistory]
+    pitch: PitchHistory
 
 
 def _lighten(f: Filtered, smoothed_x: np.ndarray | None) -> Smoothed:
@@ -98,7 +104,7 @@ def _lighten(f: Filtered, smoothed_x: np.ndarray | None) -> Smoothed:
                                      real.backend, None, bias_columns(real, slice(None)),
                                      getattr(real, "rejected", None)),
                     nees(real.x[k], unpack(real.P_packed[k]), w.truth_model[k]), smoothed_x,
-                    filters)
+                    filters, PitchHistory.of(f.pitch, w.pitch_truth, k))
 
 
 def smoothed(s: Scenario, records, smooth: bool = True):

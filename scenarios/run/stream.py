@@ -85,5 +85,5 @@ def windows_of(s: Scenario, run: int = 0, window_samples: int | None = None,
     for rec in records:
         yield Window.join(rec.window, demux.twin(rec.window.index), params=params,
                           real=rec.real, nees_real=rec.nees_real, smoothed_x=rec.smoothed_x,
-                          filters=rec.filters)
+                          filters=rec.filters, pitch=rec.pitch)
     demux.drain()

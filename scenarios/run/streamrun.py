@@ -23,7 +23,7 @@ import numpy as np
 from ..config import build
 from ..config.schema import Scenario, output_writes_telemetry, resolved_yaml
 from ..files.checks import add_checks
-from ..files.columns import estimate_columns
+from ..files.columns import estimate_columns, pitch_columns
 from ..files.csvio import CsvAppender, write_csv
 from ..files.decimate import ComparisonRows
 from ..files.summary import assemble_summary, eq55_sigma_yaw_deg, write_summary
@@ -33,6 +33,7 @@ from ..workers import blas_one_thread
 from .daily import DailyTally
 from .filter_tally import FilterTally
 from .filtering import count_rejected, design_of, filter_section
+from .pitch import PitchTally
 from .process import producer_process
 from .producer import producer
 from .stream import windows_of
@@ -98,6 +99,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     dt = s.sample_interval_s
     n = plan.n_samples
     tally = RunTally(s)
+    pitch = PitchTally(s)
     daily = DailyTally(s, build.epoch(s), n, eq55_sigma_yaw_deg(s, params))
     comparison = ComparisonRows(stage / ".comparison", n, plan.stride)
     estimate = CsvAppender(stage / "estimate.csv")
@@ -123,6 +125,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
                                       build.truth_biases_rad(s)))
         for name, (figs, _) in extra.items():
             summary[name] = figs.summary()
+        summary["pitch"] = pitch.summary()
         if steering is not None:
             summary.update(steering.summary(stage))
         write_summary(stage / "summary.json", add_checks(summary))
@@ -142,7 +145,9 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
             bias = w.real.bias_columns or {}
             estimate.append(estimate_columns(w.t_s[k], w.real.x[k], w.real.sigma[k],
                                              params.omega_n_radps)
-                            | {name: v[k] for name, v in bias.items()})
+                            | {name: v[k] for name, v in bias.items()}
+                            | pitch_columns(w.pitch.x[k], w.pitch.sigma[k]))
+            pitch.add(w.pitch, w.start, w.t_s, w.pitch_truth)
             if bias:
                 last_bias = {name: v[-1] for name, v in bias.items()}
             if w.real.rejected is not None:

@@ -15,13 +15,16 @@ from dynprop.estimator import model as em
 from dynprop.estimator.kalman import FilterResult, SmootherResult
 from dynprop.estimator.transition import discretize
 
-from ..bridge.coordinates import model_truth, truth_torques
+from ..bridge.coordinates import model_truth, pitch_truth, truth_torques
 from ..bridge.inputs import filter_inputs, initial_prior, telemetry_inputs
 from ..bridge.twin import linear_twin, measured
 from ..config import build
 from ..config.schema import Scenario
-from ..files.comparison import ComparisonInputs
+from ..files.comparison import ComparisonInputs, PitchRows
+from ..samples import nees_rows
+from ..units import DEG
 from .filtering import design_of, paper_filter, paper_smoother
+from .pitch import PitchHistory, run_pitch
 from .simulate import Simulation, simulate
 
 
@@ -41,6 +44,9 @@ class TwoRuns:
     yaw_factors: np.ndarray
     rows: np.ndarray | None = None
     true_euler_rad: np.ndarray | None = None   # (N, 3) yaw, roll, pitch, when known
+    # The pitch filter (``run.pitch``; every sample) and the truth in its states.
+    pitch: PitchHistory | None = None
+    pitch_truth: np.ndarray | None = None
 
     def comparison_inputs(self, filters: dict) -> ComparisonInputs:
         """What comparison.npz is drawn from, every sample; ``filters`` are the
@@ -51,7 +57,26 @@ class TwoRuns:
         return ComparisonInputs(
             self.params.omega_n_radps, self.real, self.truth_model,
             None if self.smoothed is None else self.smoothed.x,
-            None if self.linear is None else self.linear.x, self.twin_model, euler, filters)
+            None if self.linear is None else self.linear.x, self.twin_model, euler, filters,
+            self.pitch_rows(slice(None)))
+
+    def pitch_rows(self, rows) -> PitchRows | None:
+        """The pitch filter at ``rows`` of every sample (its NEES, on the NEES samples,
+        at those of ``rows``: ``comparison_arrays``'s ``nees_data`` indices)."""
+        p = self.pitch
+        if p is None:
+            return None
+        truth = None if self.pitch_truth is None else self.pitch_truth[rows]
+        return PitchRows(p.x[rows], p.sigma[rows], p.innovations[rows],
+                         p.innovation_var[rows], truth, p.nees)
+
+
+def pitch_history(s: Scenario, pitch_rad, speeds, truth: np.ndarray | None, t_s=None
+                  ) -> PitchHistory:
+    """The pitch filter over a whole record and its NEES on the NEES samples against
+    ``truth`` (its states at every sample, or None)."""
+    r = run_pitch(s, pitch_rad, speeds, t_s)
+    return PitchHistory.of(r, truth, nees_rows(0, len(r.x)), keep_P=True)
 
 
 def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
@@ -110,5 +135,9 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
             twin_model[:, [1, 3]] *= twin_params.omega_n_radps / params.omega_n_radps
         linear, _ = filter_telemetry(s, params, disc, *measured(twin_tel), rows=rows)
     smoothed = paper_smoother(design_of(s), real, disc, **smoother_args) if smooth else None
+    pitch = tel.pitch_rad if telemetry_columns is None else telemetry_columns["pitch_deg"] * DEG
+    p_truth = pitch_truth(truth, tt)
     return TwoRuns(sim, twin_tel, params, truth_model, twin_model, real, linear, smoothed,
-                   build.yaw_factors(s), None if rows is None else np.asarray(rows))
+                   build.yaw_factors(s), None if rows is None else np.asarray(rows),
+                   pitch=pitch_history(s, pitch, seen.speeds_radps, p_truth),
+                   pitch_truth=p_truth)

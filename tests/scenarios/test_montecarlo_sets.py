@@ -534,6 +534,19 @@ def test_set_statistics_are_those_of_the_stored_cases(twin_set):
             math.sqrt(np.mean(err[:, conv, k] ** 2)), rel=1e-12), name
         assert r["filter_sigma_rms"] == pytest.approx(
             math.sqrt(np.mean(sig[:, conv, k] ** 2)), rel=1e-12), name
+    # The pitch filter's 3-state figures, kept apart from the 9-state ones.
+    p = summary["pitch"]
+    nees_p = np.mean([a["nees_pitch"].astype(float) for a in arrays], axis=0)
+    assert p["nees"]["dof"] == 3
+    assert p["nees"]["bounds_95"] == pytest.approx(
+        [stats.chi2.ppf(0.025, 3 * m) / m, stats.chi2.ppf(0.975, 3 * m) / m], rel=1e-9)
+    assert p["nees"]["mean_after_convergence"] == pytest.approx(nees_p[conv].mean(), rel=1e-12)
+    err_p = np.array([a["err_pitch"].astype(float) for a in arrays])
+    assert p["rms_after_convergence"]["pitch_deg"]["ensemble_rms"] == pytest.approx(
+        math.sqrt(np.mean(err_p[:, conv, 0] ** 2)), rel=1e-12)
+    for r, a in zip(records, arrays, strict=True):
+        assert r["nees_mean_pitch"] == pytest.approx(
+            a["nees_pitch"].astype(float)[conv].mean(), rel=1e-6)
     with np.load(twin_set / "montecarlo.npz") as fig:
         nees_avg = np.mean([a["nees"].astype(float) for a in arrays], axis=0)
         assert fig["nees_avg"] == pytest.approx(nees_avg, rel=1e-12)
