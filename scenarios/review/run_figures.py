@@ -95,7 +95,8 @@ def _extremes(c: dict, key: str, col: int) -> tuple:
 
 def errors(c: dict, ax: Axis, eq55_deg: float | None) -> Plot:
     """Yaw, roll and h errors with the filter's ±3σ (the linearized error and the EKF
-    beside them when the run has them), then real − linearized on its own scale."""
+    beside them when the run has them), the pitch filter's error, then real −
+    linearized on its own scale."""
     if "err_real" not in c:
         return estimates(c, ax)
     data, panels, shapes = list(ax.legend), [], list(ax.shapes)
@@ -121,6 +122,15 @@ def errors(c: dict, ax: Axis, eq55_deg: float | None) -> Plot:
                           tr.COLORS["real"], y, lo, hi, group="real", show=first)
         if n == "yaw" and eq55_deg is not None:
             shapes += [tr.hline(s * 3 * eq55_deg, y, tr.COLORS["paper"]) for s in (1, -1)]
+    if "err_pitch" in c:
+        # The pitch filter's (Eq. 3b): a filter of its own, no twin or EKF beside it.
+        y = tr.axis(len(panels))
+        panels.append({"title": "pitch error (deg)", "range": _range(
+            ax, 3 * c["sigma_pitch"][:, 0], c["err_pitch"][:, 0])})
+        data += tr.sigma_band(ax.x, c["sigma_pitch"][:, 0], y, group="sigma", show=False)
+        lo, hi = _extremes(c, "err_pitch", 0)
+        data += tr.series(ax.x, c["err_pitch"][:, 0], "real error (filter on the truth)",
+                          tr.COLORS["real"], y, lo, hi, group="real", show=False)
     if "err_real_minus_linear" in c:
         y = tr.axis(len(panels))
         panels.append({"title": "real − linearized (deg)"})
@@ -130,6 +140,7 @@ def errors(c: dict, ax: Axis, eq55_deg: float | None) -> Plot:
                               f"{n}: real − linearized", color, y, lo, hi)
     caption = ("Estimate − truth with the filter's ±3σ; the linearized error is the same "
                "filter on the linear model's telemetry, against the linear model. "
+               + ("Pitch is its own 3-state filter's (Eq. 3b). " if "err_pitch" in c else "")
                + (f"Red dotted: ±3σ_yaw of Eq. 55 ({eq55_deg:.4f}°). " if eq55_deg else "")
                + "The first hour (the filter's start-up) is left out of the initial scales. "
                "Drag to zoom (every time figure follows), double-click to reset.")
