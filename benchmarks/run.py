@@ -139,6 +139,58 @@ def report_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
     return out
 
 
+def export_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
+    """Issue 33: `dynprop export` as a user runs it (the whole command, start-up
+    included): the AEM of the default two-day run's estimate (median of 5; target
+    ≤ 1 s) and, given a year's run (``year``, else $BENCH_YEAR_DIR; none is made here),
+    the AEM of its whole year, its wall time and its peak memory (the largest RSS of
+    the command's process, from getrusage in a process of its own), which stays
+    bounded: estimate.csv (140 MB) is read in blocks.  The year's estimate needs
+    ``pitch_deg`` (a run before the pitch filter has none): its truth is exported then,
+    and a note says so."""
+    exe = str(Path(sys.executable).with_name("dynprop"))
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        run = Path(tmp) / "run"
+        subprocess.run([exe, "run", "goes_next_equinox", "--out", str(run)], check=True,
+                       capture_output=True)
+        what = _exported(run)
+        out.append(("export_2day_s", median_time(lambda: subprocess.run(
+            [exe, "export", str(run), "--format", "aem", "--what", what], check=True,
+            capture_output=True), repeats=5), "s"))
+        if year is None and os.environ.get("BENCH_YEAR_DIR"):
+            year = Path(os.environ["BENCH_YEAR_DIR"])
+        if year is not None:
+            what = _exported(year)
+            wall, rss = _peak_rss([exe, "export", str(year), "--format", "aem", "--what",
+                                   what, "--out", f"{tmp}/year.aem"])
+            out += [("export_year_s", wall, "s"), ("export_year_peak_rss_MB", rss, "MB")]
+    return out
+
+
+def _exported(run: Path) -> str:
+    """``estimate`` when the run's estimate.csv has pitch_deg, else ``truth``."""
+    header = (run / "estimate.csv").open().readline().strip().split(",")
+    if "pitch_deg" in header:
+        return "estimate"
+    print(f"bench note: {run}/estimate.csv has no pitch_deg; its truth.csv is exported",
+          flush=True)
+    return "truth"
+
+
+def _peak_rss(args: list[str]) -> tuple[float, float]:
+    """Wall time and peak RSS (MB) of a command, measured by a Python process of its own
+    (getrusage(RUSAGE_CHILDREN) holds the largest child it waited for: only this one)."""
+    probe = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
+             "subprocess.run(sys.argv[1:], check=True, capture_output=True); "
+             "print(time.perf_counter() - t, "
+             "resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)")
+    text = subprocess.run([sys.executable, "-c", probe, *args], check=True,
+                          capture_output=True, text=True).stdout
+    wall, rss = map(float, text.split())
+    return wall, rss
+
+
 def _page_open_s(page: Path) -> float | None:
     """The page's own opening time in headless Chromium, through the browser test's
     helper (tests/scenarios/browser.py): navigation start to every figure drawn, the
@@ -301,7 +353,8 @@ def main() -> None:
     if only:
         # `python benchmarks/run.py discretize_ms run_figures_2day_s`: just those.
         for name in only:
-            if name in ("tune_figures", "batch_figures", "report_figures"):
+            name = {"export": "export_figures"}.get(name, name)   # `make bench BENCH=export`
+            if name in ("tune_figures", "batch_figures", "report_figures", "export_figures"):
                 for key, value, unit in globals()[name]():
                     report(key, value, unit)
                 continue
@@ -369,6 +422,8 @@ def main() -> None:
     if year is not None:
         for key, value, unit in report_figures(year):
             report(key, value, unit)
+    for key, value, unit in export_figures(year):
+        report(key, value, unit)
     year_dir.cleanup()
     k = 5000  # the plain-numpy loop, for comparison, scaled to a day
     part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,

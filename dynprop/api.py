@@ -13,6 +13,7 @@ from pathlib import Path
 
 from dynprop.scenarios.config.loader import ScenarioError
 from dynprop.scenarios.config.schema import Scenario
+from dynprop.scenarios.export.source import ExportError
 
 from .results import (
     BatchResult,
@@ -24,8 +25,8 @@ from .results import (
     TuneResult,
 )
 
-__all__ = ["ScenarioError", "batch", "covariance", "linearization", "load_scenario", "montecarlo",
-           "observability", "open_run", "run", "simulate", "tune"]
+__all__ = ["ExportError", "ScenarioError", "batch", "covariance", "export", "linearization",
+           "load_scenario", "montecarlo", "observability", "open_run", "run", "simulate", "tune"]
 
 
 def load_scenario(name_or_path: str | Path, set: dict | None = None, **overrides
@@ -106,6 +107,27 @@ def report(path, yaw_requirement_deg: float | None = None) -> Path:
     ``yaw_requirement_deg`` overrides the scenario's ``report.yaw_requirement_deg``."""
     from dynprop.scenarios.review.report import write_report
     return write_report(Path(getattr(path, "path", path)), None, yaw_requirement_deg)
+
+
+def export(path, format: str = "aem", what: str = "estimate", frame: str = "inertial",
+           at=None, out=None, truth=None, object_id: str | None = None, force: bool = False):
+    """A run's attitude as a CCSDS attitude message, as `dynprop export DIR`: an AEM of
+    every row of estimate.csv (``what="truth"``: truth.csv) or an APM at one time
+    (``format="apm"``, ``at``: seconds after epoch_utc, ISO 8601 UTC text or an aware
+    datetime), in EME2000 (``frame="inertial"``) or the orbit frame (``"orbit"``,
+    LVLH_ROTATING).  ``path``: the directory, or a result object (``r.export()`` is the
+    same).  Written to ``DIR/estimate.aem`` (``truth.aem``, ``.apm``) unless ``out``;
+    ``truth``: another tool's AEM to compare with::
+
+        e = dynprop.export("runs/eq", truth="other_tool.aem")
+        e.path, e.segments, e.comparison["angle_rms_deg"]
+
+    Returns an ``ExportResult``; bad input raises ``ExportError`` (or ``ScenarioError``,
+    ``AemError``) with the CLI's one-line message, and writes nothing."""
+    from dynprop.scenarios.export.write import export_run
+    return export_run(Path(getattr(path, "path", path)), format, what, frame, at,
+                      None if out is None else Path(out),
+                      None if truth is None else Path(truth), object_id, force)
 
 
 def open_run(path: str | Path):

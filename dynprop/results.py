@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from dynprop.scenarios.export.write import ExportResult  # noqa: F401 (dynprop.ExportResult)
 from dynprop.scenarios.files.columns import STATE_COLUMNS
 from dynprop.scenarios.files.csvio import read_csv
 from dynprop.scenarios.files.rundir import staged_run_dir
@@ -87,6 +88,15 @@ class SimulationResult(_Directory):
     @property
     def scenario_yaml(self) -> str:
         return (self.path / "scenario.yaml").read_text()
+
+    def export(self, format: str = "aem", what: str = "estimate", frame: str = "inertial",
+               at=None, out=None, truth=None, object_id: str | None = None,
+               force: bool = False):
+        """The attitude as a CCSDS AEM or APM, as `dynprop export` (``dynprop.export``):
+        written into the directory (``estimate.aem``, ...; ``save`` copies it too)
+        unless ``out``; returns an ``ExportResult``."""
+        from .api import export
+        return export(self, format, what, frame, at, out, truth, object_id, force)
 
 
 class RunResult(SimulationResult):

@@ -142,8 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "estimate.csv, smoothed.csv, summary.json, plots/")
     est.add_argument("telemetry", type=Path, metavar="TELEMETRY.csv")
     est.add_argument("--scenario", required=True, help="scenario (e.g. the run's scenario.yaml)")
-    est.add_argument("--truth", type=Path, metavar="TRUTH.csv",
-                     help="a truth.csv (every sample, or a run's at output.interval_s): also "
+    est.add_argument("--truth", type=Path, metavar="TRUTH.csv|X.aem",
+                     help="a truth.csv (every sample, or a run's at output.interval_s), or a "
+                     "CCSDS AEM (attitude only: roll, yaw and pitch errors): also "
                      "compute the errors, NEES and run's summary, at the samples it has")
     est.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                      help="override a scenario key (repeatable, after --tuned-from's); "
@@ -231,6 +232,31 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--yaw-requirement-deg", type=float, metavar="DEG",
                         help="the yaw requirement to judge against, 3σ over 24 h (default: "
                         "the scenario's report.yaw_requirement_deg; none: not tested)")
+    export = sub.add_parser("export", help="a run's attitude (estimate or truth) as a CCSDS "
+                            "attitude message: an AEM of every row (DIR/estimate.aem) or an "
+                            "APM at one time, EME2000 or orbit frame to SC_BODY_1")
+    export.add_argument("dir", type=Path, metavar="DIR", help="a `run`, `estimate` or "
+                        "`simulate` directory (its scenario.yaml and estimate.csv/truth.csv)")
+    export.add_argument("--format", required=True, choices=("aem", "apm"),
+                        help="aem: every row, a segment per stretch without dropouts; apm: "
+                        "one time (--at)")
+    export.add_argument("--what", choices=("estimate", "truth"), default="estimate",
+                        help="estimate.csv (default) or truth.csv")
+    export.add_argument("--frame", choices=("inertial", "orbit"), default="inertial",
+                        help="REF_FRAME_A: EME2000 (inertial, default; composed with the "
+                        "run's orbit and epoch) or LVLH_ROTATING (the orbit frame)")
+    export.add_argument("--at", metavar="T", help="the APM's time: seconds after epoch_utc "
+                        "or an ISO 8601 UTC time (2026-03-20T18:00:00Z); between rows, "
+                        "interpolated as an AEM reader would")
+    export.add_argument("--out", type=Path, metavar="FILE", help="the file to write "
+                        "(default: DIR/estimate.aem, DIR/truth.apm, ...)")
+    export.add_argument("--force", action="store_true", help="replace an existing --out")
+    export.add_argument("--object-id", metavar="ID", help="OBJECT_ID (default SIMULATED: "
+                        "the spacecraft is dynprop's; give the real designator, e.g. 2016-071A)")
+    export.add_argument("--truth", type=Path, metavar="FILE.aem", help="another tool's "
+                        "attitude (an AEM, EME2000/J2000/ICRF/GCRF or LVLH_ROTATING): print "
+                        "the rotation angle and roll/pitch/yaw differences, exported - FILE, "
+                        "at the exported epochs inside its segments")
     plot = sub.add_parser("plot", help="(re)draw the figures of a run or Monte Carlo directory")
     plot.add_argument("run_dir", type=Path, metavar="DIR")
     return parser

@@ -136,6 +136,25 @@ def _cmd_report(args) -> int:
     return 0
 
 
+def _cmd_export(args) -> int:
+    from .export.compare import lines
+    from .export.write import export_run
+    start = time.perf_counter()
+    r = export_run(args.dir, args.format, args.what, args.frame, args.at, args.out,
+                   args.truth, args.object_id, args.force)
+    if r.format == "aem":
+        n = len(r.segments)
+        span = f"{r.segments[0][0]} to {r.segments[-1][1]}"
+        what = f"{r.rows} rows in {n} segment{'s' * (n != 1)}, {span}"
+    else:
+        what = f"at {r.epoch}"
+    print(f"wrote {r.path}: the {r.what}, {r.frame} -> SC_BODY_1, {what} UTC "
+          f"({time.perf_counter() - start:.1f} s)")
+    for line in lines(r.comparison) if r.comparison is not None else ():
+        print(line)
+    return 0
+
+
 def _cmd_estimate(args) -> int:
     from .files.rundir import check_out_dir, staged_run_dir
     from .run.estimate import estimate_inputs, estimate_to_directory
@@ -344,7 +363,7 @@ COMMANDS = {"simulate": _cmd_simulate, "scenarios": _cmd_scenarios, "plot": _cmd
             "observability": _cmd_observability, "covariance": _cmd_covariance,
             "linearization": _cmd_linearization, "montecarlo": _cmd_montecarlo,
             "trim": _cmd_trim, "tune": _cmd_tune,
-            "batch": _cmd_batch, "report": _cmd_report}
+            "batch": _cmd_batch, "report": _cmd_report, "export": _cmd_export}
 
 
 def os_error_line(exc: OSError, args) -> str:
@@ -369,22 +388,33 @@ def os_error_line(exc: OSError, args) -> str:
     return f"{where}: {why}"
 
 
+# The exceptions that mean bad input (exit 2), by the module that defines each.
+INPUT_ERRORS = (("dynprop.scenarios.files.rundir", "RunDirError"),
+                ("dynprop.scenarios.config.loader", "ScenarioError"),
+                ("dynprop.scenarios.montecarlo", "SchedulerError"),
+                ("dynprop.scenarios.trim.batch", "TrimError"),
+                ("dynprop.scenarios.tune.source", "TuneError"),
+                ("dynprop.estimator.batch", "BatchError"),
+                ("dynprop.scenarios.export.source", "ExportError"),
+                ("dynprop.scenarios.files.aem", "AemError"))
+
+
+def input_errors() -> tuple[type[Exception], ...]:
+    """``InputError`` and the ``INPUT_ERRORS`` of the modules loaded: one never
+    imported raised nothing.  Looked up as an exception is matched, so that a command
+    does not import every analysis (scipy: 0.3 s of start-up) to name their errors."""
+    return (InputError, *(getattr(sys.modules[m], name) for m, name in INPUT_ERRORS
+                          if m in sys.modules))
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # The command line as given, for the reports that record it (main([...]) from
     # Python or a test has its own, not the interpreter's sys.argv).
     args.argv = list(sys.argv[1:] if argv is None else argv)
-    from dynprop.estimator.batch import BatchError
-
-    from .config.loader import ScenarioError
-    from .files.rundir import RunDirError
-    from .montecarlo import SchedulerError
-    from .trim.batch import TrimError
-    from .tune.source import TuneError
     try:
         return COMMANDS[args.command](args)
-    except (InputError, RunDirError, ScenarioError, SchedulerError, TrimError,
-            TuneError, BatchError) as exc:
+    except input_errors() as exc:
         # One line per problem, each naming its key path, column or argument.
         for line in str(exc).splitlines() or [""]:
             print(f"dynprop: error: {line}", file=sys.stderr)

@@ -7,6 +7,7 @@ numbers and messages the API returns are the ones the CLI prints."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -111,3 +112,39 @@ def test_linearization_returns_the_report(tmp_path):
     assert lin.verdict and lin.markdown.startswith("#")
     lin.save(tmp_path / "lin")
     assert json.loads((tmp_path / "lin" / "report.json").read_text())["verdict"] == lin.verdict
+
+
+def _data_lines(path: Path) -> list[str]:
+    """An AEM/APM from its first META_START/EPOCH on: what does not name where or when
+    it was written (the header's directory comment and CREATION_DATE do)."""
+    lines = path.read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(("META_START",
+                                                                       "OBJECT_NAME")))
+    return lines[start:]
+
+
+def test_export_writes_the_clis_message_and_compares_as_it_does(both, tmp_path):
+    base, r = both
+    rc, out, err = run_cli("export", str(base / "cli"), "--format", "aem", "--what", "truth",
+                           "--out", str(tmp_path / "cli.aem"))
+    assert rc == 0, err
+    e = r.export(what="truth", out=tmp_path / "api.aem", truth=tmp_path / "cli.aem")
+    assert isinstance(e, dynprop.ExportResult)
+    assert (e.path, e.format, e.what, e.frame, e.rows) == (tmp_path / "api.aem", "aem", "truth",
+                                                           "EME2000", 338)
+    assert _data_lines(e.path) == _data_lines(tmp_path / "cli.aem")
+    assert e.segments == [("2026-03-20T12:00:00.000000", "2026-03-20T17:59:28.000000", 338)]
+    assert e.comparison["compared"] == 338 and e.comparison["angle_max_deg"] < 1e-9
+    # Into the directory by default (a copy: the CLI's directory is compared whole above).
+    copy = Path(shutil.copytree(base / "cli", tmp_path / "copy"))
+    apm = dynprop.export(copy, format="apm", what="truth", frame="orbit",
+                         at="2026-03-20T13:00:00Z")
+    assert apm.path == copy / "truth.apm" and apm.epoch == "2026-03-20T13:00:00.000000"
+    rc, _, err = run_cli("export", str(copy), "--format", "apm", "--what", "truth", "--frame",
+                         "orbit", "--at", "3600", "--out", str(tmp_path / "cli.apm"))
+    assert rc == 0, err
+    assert _data_lines(apm.path) == _data_lines(tmp_path / "cli.apm")
+    with pytest.raises(dynprop.ExportError) as info:
+        dynprop.export(copy, at=60)
+    rc, _, err = run_cli("export", str(copy), "--format", "aem", "--at", "60")
+    assert rc == 2 and err == f"dynprop: error: {info.value}\n"

@@ -7,7 +7,8 @@ no physics, and nothing imports the dynprop facade.
 Inside scenarios (the application), each room has a rank, and a module may import
 only its own room and rooms of a lower rank (docs/architecture.md, "Import rules"):
 a lower room never imports a higher one, and rooms of one rank (files and bridge;
-trim, linearization and montecarlo; studies and review) never import each other.  Only ``figures``
+trim, linearization, montecarlo, tune, batch and export; studies and review) never
+import each other.  Only ``figures``
 imports ``plots``.  Every import counts, relative or absolute, at module level or
 inside a function.
 """
@@ -39,7 +40,7 @@ RANKS = {
     "files": 2, "bridge": 2,
     "figures": 3,
     "run": 4,
-    "trim": 5, "linearization": 5, "montecarlo": 5, "tune": 5, "batch": 5,
+    "trim": 5, "linearization": 5, "montecarlo": 5, "tune": 5, "batch": 5, "export": 5,
     "studies": 6, "review": 6,
     "commands": 7, "arguments": 7, "console": 7,
     "cli": 8,

@@ -134,6 +134,8 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float, scenario: dict,
     series = {}
     for j, n in enumerate(UNITS):
         i = COLUMNS[n]
+        if not np.isfinite(c["err_real"][:, i]).any():
+            continue    # a truth without that state (an AEM: the attitude only)
         s = {"unit": UNITS[n], "real": c["err_real"][:, i], "sigma": c["sigma"][:, i],
              "style": "trace" if n == "yaw" else "envelope"}
         if "err_linear" in c:

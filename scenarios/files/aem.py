@@ -92,13 +92,21 @@ class AemSegment:
         if t.size and (t.min() < rows[0] or t.max() > rows[-1]):
             raise ValueError("interpolation epochs outside the segment")
         n = min(int(self.meta.get("INTERPOLATION_DEGREE", "1")), len(rows) - 1) + 1
-        first = np.searchsorted(rows, t, "right") - 1 - (n - 1) // 2
-        out = np.empty((t.size, 4))
-        for k, s in enumerate(np.clip(first, 0, len(rows) - n)):
-            x, q = (rows[s:s + n] - rows[s]) / 1e9, self.quaternions[s:s + n]
-            dx = (t[k] - rows[s]) / 1e9 - x
-            w = [np.prod(np.delete(dx, i) / (x[i] - np.delete(x, i))) for i in range(n)]
-            out[k] = np.asarray(w) @ (q * np.sign(q @ q[0])[:, None])
+        first = np.clip(np.searchsorted(rows, t, "right") - 1 - (n - 1) // 2, 0,
+                        len(rows) - n)
+        # Every epoch's window at once: (M, n) rows, times in s from the window's first.
+        idx = first[:, None] + np.arange(n)
+        x = (rows[idx] - rows[first][:, None]) / 1e9
+        dx = ((t - rows[first]) / 1e9)[:, None] - x
+        w = np.ones((t.size, n))
+        for i in range(n):
+            for j in range(n):
+                if j != i:
+                    w[:, i] *= dx[:, j] / (x[:, i] - x[:, j])
+        q = self.quaternions[idx]
+        # q and −q are one attitude: each window's rows on the side of its first.
+        q = q * np.sign(np.einsum("mnk,mk->mn", q, q[:, 0]))[..., None]
+        out = np.einsum("mn,mnk->mk", w, q)
         return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
@@ -117,6 +125,7 @@ def write_aem_blocks(out, blocks, meta: AemMeta, *, epoch=None, cadence_s=None,
     header = _header("AEM", meta, creation_date, cadence_s)
     stream = open(out, "w", encoding="ascii", newline="\n") if isinstance(out, str | Path) \
         else out
+    state: dict = {"seg": None}
     try:
         stream.write(header)
         state = {"last": None, "q": None, "seg": None, "done": [], "cadence": cadence_s}
@@ -127,6 +136,9 @@ def write_aem_blocks(out, blocks, meta: AemMeta, *, epoch=None, cadence_s=None,
             raise AemError("no finite rows to write: an AEM needs a segment")
         return state["done"]
     finally:
+        # A block that raised mid-segment leaves that segment's spool open.
+        if state.get("seg") is not None:
+            state["seg"]["spool"].close()
         if stream is not out:
             stream.close()
 

@@ -50,10 +50,11 @@ def names_file(path: Path | str) -> Iterator[None]:
 
 
 # What dynprop writes into the directories it makes (run, estimate, simulate,
-# linearization, montecarlo, tune, trim): `--force` replaces a directory that holds
-# nothing else.  Files, figures included, are dynprop's by their very names, so that
-# a user's own CSV, notes or pictures are never taken for a run's (tests/scenarios/
-# test_messages.py checks this list against the names the commands write).
+# linearization, montecarlo, tune, trim) or into a run's (report, export): `--force`
+# replaces a directory that holds nothing else.  Files, figures included, are
+# dynprop's by their very names, so that a user's own CSV, notes or pictures are
+# never taken for a run's (tests/scenarios/test_messages.py checks this list against
+# the names the commands write).
 OWN_FIGURES = frozenset((
     "errors.png", "estimates.png", "consistency.png", "torques.png",
     "telemetry_overview.png", "season.png", "trim_loop.png", "truth.png", "telemetry.png",
@@ -65,11 +66,14 @@ OWN_FILES = frozenset((
     "estimate.csv", "smoothed.csv", "daily.csv", "comparison.npz", "trim_loop.csv",
     "montecarlo.json", "montecarlo.npz", "montecarlo_case.json", "montecarlo_case.npz",
     "report.json", "report.md", "tune.json", "tune.md", "tuned_noise.yaml", "trim.json",
-    "trim.md", "batch.json", "report.html")) | OWN_FIGURES
+    "trim.md", "batch.json", "report.html",
+    # `dynprop export`'s default names only: an AEM of another tool kept in a run
+    # directory (for `--truth`) is the user's, and --force must not take it.
+    "estimate.aem", "truth.aem", "estimate.apm", "truth.apm")) | OWN_FIGURES
 _OWN_PATTERN = re.compile(r"^(estimate_[a-z0-9_]+\.csv|case-\d+\.(json|npz|full\.npz))$")
 OWN_DIRS = frozenset(("plots", "cases", "trim", "tune", "verify", "batch"))
 # Temporaries of a write killed half way: ``.NAME.XXXXXXXX`` (montecarlo.store's
-# atomic_write) and ``.NAME.tmp`` (figures.save_figure).
+# atomic_write, export.write's) and ``.NAME.tmp`` (figures.save_figure).
 _TEMPORARY = re.compile(r"^\.(?P<name>.+)\.(tmp|[A-Za-z0-9_]{8})$")
 LISTED = 5   # foreign files named in a message
 

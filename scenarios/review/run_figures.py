@@ -100,8 +100,10 @@ def errors(c: dict, ax: Axis, eq55_deg: float | None) -> Plot:
     if "err_real" not in c:
         return estimates(c, ax)
     data, panels, shapes = list(ax.legend), [], list(ax.shapes)
-    for i, n in enumerate(("yaw", "roll", "h")):
-        y, col, first = tr.axis(i), STATE[n], i == 0
+    for n in ("yaw", "roll", "h"):
+        if not np.isfinite(c["err_real"][:, STATE[n]]).any():
+            continue    # a truth without that state (an AEM: the attitude only)
+        y, col, first = tr.axis(len(panels)), STATE[n], not panels
         panels.append({"title": f"{n} error ({UNITS[n]})", "range": _range(
             ax, 3 * c["sigma"][:, col], c["err_real"][:, col],
             *(c[k][:, col] for k in ("err_linear", "err_ekf") if k in c))})
@@ -173,7 +175,8 @@ def consistency(c: dict, ax: Axis, summary: dict) -> Plot | None:
     data, panels, shapes = list(ax.legend), [], list(ax.shapes)
     nees_b = summary.get("nees_bounds_95_per_sample")
     nis_b = summary.get("nis_bounds_95_per_sample")
-    if "nees_real" in c:
+    # An attitude-only truth (an AEM) gives no NEES: all NaN, no panel.
+    if "nees_real" in c and np.isfinite(c["nees_real"]).any():
         panels.append({"title": "NEES (9 states)"})
         # The linearized NEES first, as outlines: the real one over it is the verdict.
         for key, name, color in (("linear", "NEES, linearized", tr.COLORS["linear"]),

@@ -7,6 +7,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+from dynprop.estimator import model as em
 from dynprop.estimator.consistency import nees
 from dynprop.estimator.pitch import unpack as pitch_unpack
 from dynprop.estimator.steps import StepTable
@@ -20,6 +21,7 @@ from ..files.checks import add_checks
 from ..files.columns import estimate_columns, pitch_columns
 from ..files.comparison import PitchRows, comparison_arrays
 from ..files.csvio import write_csv
+from ..files.rundir import RunDirError
 from ..files.summary import assemble_summary, write_summary
 from ..records import FilterHistory
 from ..samples import nees_rows, output_rows, sun_gaps, sun_gaps_at
@@ -47,9 +49,41 @@ def estimate_inputs(s: Scenario, path: Path, truth_path: Path | None = None):
     from ..files.truth_file import read_truth
 
     grid = on_grid(read_telemetry(path, s), s.sample_interval_s, s.estimator.max_gap_s, path)
-    truth = None if truth_path is None else read_truth(truth_path, s, grid.columns["t_s"],
-                                                       grid.regular)
-    return grid, truth
+    if truth_path is None:
+        return grid, None
+    if _is_aem(truth_path):
+        from ..files.aem import AemError
+        from ..files.truth_aem import read_truth_aem
+        try:
+            return grid, read_truth_aem(truth_path, s, grid.columns["t_s"], grid.regular)
+        except AemError as exc:
+            raise RunDirError(str(exc)) from None
+    return grid, read_truth(truth_path, s, grid.columns["t_s"], grid.regular)
+
+
+def _is_aem(path) -> bool:
+    """An attitude history (CCSDS AEM, attitude only: ``files.truth_aem``) rather than
+    a truth.csv: by its first keyword, whatever the file is called."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(256).lstrip().startswith(b"CCSDS_AEM_VERS")
+    except OSError:
+        return False    # read_truth says what is wrong with it
+
+
+def attitude_only(truth) -> bool:
+    """Whether a truth holds the attitude alone (an AEM: no rates, momentum or
+    torques), so only the roll, yaw and pitch errors can be formed."""
+    return truth is not None and not np.isfinite(truth.h_Nms).any()
+
+
+def _attitude_truth(truth) -> tuple[np.ndarray, np.ndarray]:
+    """The model states and pitch states of an attitude-only truth: the angles, NaN
+    for every state it does not hold (their errors and the NEES are then not tested)."""
+    m = np.full((len(truth.t_s), em.N_STATES), np.nan)
+    m[:, em.R], m[:, em.Y] = truth.roll_rad, truth.yaw_rad
+    nan = np.full(len(truth.t_s), np.nan)
+    return m, np.column_stack([truth.pitch_rad, nan, nan])
 
 
 def filter_summary(s: Scenario, name: str, result, truth_model, t_s, present,
@@ -99,7 +133,9 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     smoothed = paper_smoother(design_of(s), real, disc, **smoother_args)
     sparse = truth is not None and not truth.every_sample(n)
     truth_model = p_truth = None
-    if truth is not None:
+    if attitude_only(truth):
+        truth_model, p_truth = _attitude_truth(truth)
+    elif truth is not None:
         tt = truth_torques(truth, s.estimator.model_torques, params.omega0_radps)
         truth_model = model_truth(params, truth, tt)
         p_truth = pitch_truth(truth, tt)
@@ -176,6 +212,15 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
                    daily=None)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s),
                             **_truth_section(truth, t, ends)}
+    if attitude_only(truth):
+        # What needs the states an attitude history does not hold (rates, h, the
+        # torque states: their errors, (e/σ)², NEES) is not tested, null.
+        summary = _finite_or_none(summary)
+        summary["telemetry"]["truth_holds"] = "attitude only"
+    elif truth is not None:
+        summary["telemetry"]["truth_holds"] = "every state"
+    else:
+        summary["telemetry"]["truth_holds"] = None
     # summary.json before the figures: they draw its verdicts and warnings.
     write_summary(stage / "summary.json", add_checks(summary))
     from ..figures.run import plot_run_figures
@@ -192,6 +237,17 @@ def _sparse_pitch(h: PitchHistory | None, truth) -> PitchRows | None:
     if truth is not None:
         values = nees(h.x, pitch_unpack(h.P_packed), truth)
     return PitchRows(h.x, h.sigma, h.innovations, h.innovation_var, truth, values)
+
+
+def _finite_or_none(v):
+    """``v`` with every NaN float (a figure of a state the truth lacks) as None."""
+    if isinstance(v, dict):
+        return {k: _finite_or_none(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return type(v)(_finite_or_none(x) for x in v)
+    if isinstance(v, float | np.floating) and not np.isfinite(v):
+        return None
+    return v
 
 
 def gap_ends(gaps, n: int) -> list[int]:

@@ -127,7 +127,11 @@ def test_estimate_csv_has_every_state_with_units_and_sigmas(short_run):
     names = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms",
              "N_px_Nm", "N_pz_Nm", "N_cx_Nm", "N_cz_Nm")
     assert STATE_COLUMNS == names
-    assert header == ["t_s", *names, *(f"sigma_{n}" for n in names)]
+    # The pitch filter's states (Eq. 3b) after the paper's 9.
+    pitch = ("pitch_deg", "pitch_rate_degps", "N_y_Nm")
+    assert header == ["t_s", *names, *(f"sigma_{n}" for n in names),
+                      *pitch, *(f"sigma_{n}" for n in pitch)]
+    names = names + pitch
     est, tel = read_csv(run / "estimate.csv"), read_csv(run / "telemetry.csv")
     assert len(est["t_s"]) == len(tel["t_s"]) == math.ceil(600 / DT)
     # k·0.512 s has at most 8 significant digits: %.10g and the shortest round-trip
