@@ -75,9 +75,29 @@ def estimate_lines(name: str, summary: dict, step_s: float, seconds: float) -> l
                      f"for{every}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; "
                      f"{_gap_ends(summary)}; {_nees(summary['checks']['nees'])}; {eq55}")
         lines += _ekf_line(summary)
+    lines += _pitch_line(summary)
     lines += _bias_and_gate(summary)
     lines += [f"warning: {w['message']}" for w in summary["warnings"]]
     return lines
+
+
+def _pitch_line(summary: dict) -> list[str]:
+    """The pitch filter's line (Eq. 3b), when it ran."""
+    p = summary.get("pitch")
+    if not p or p["sigma_pitch_mean_after_1h_deg"] is None:
+        return []
+    sigma = f"σ {p['sigma_pitch_mean_after_1h_deg']:.4f} deg"
+    if p["sigma_pitch_steady_state_deg"] is not None:
+        sigma += f" (its model's steady state {p['sigma_pitch_steady_state_deg']:.4f})"
+    if p["pitch_error_rms_after_1h_deg"] is None:
+        return [f"pitch filter (Eq. 3b): {sigma}; no truth, so no errors"]
+    parts = [f"pitch filter (Eq. 3b): error RMS {p['pitch_error_rms_after_1h_deg']:.4f} deg",
+             sigma, f"{100 * p['pitch_within_3sigma_fraction_after_1h']:.2f}% within 3σ"]
+    if p["nees_mean_after_1h"] is not None:
+        lo, hi = p["nees_bounds_95"]
+        parts.append(f"mean NEES {p['nees_mean_after_1h']:.2f} (3 states; 95% bounds "
+                     f"{lo:.2f}–{hi:.2f})")
+    return ["; ".join(parts) + " (after the first hour)"]
 
 
 def _bias_and_gate(summary: dict) -> list[str]:
@@ -104,6 +124,7 @@ def run_lines(name: str, summary: dict, seconds: float) -> list[str]:
     parts = [f"yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg", _gap_ends(summary),
              _real_minus_linear(summary), _nees(summary["checks"]["nees"]),
              f"Eq. 55: {summary['analytic_sigma_yaw_deg']:.4f} deg", f"{seconds:.1f} s"]
-    lines = [f"{name}: " + "; ".join(parts)] + _ekf_line(summary) + _bias_and_gate(summary)
+    lines = [f"{name}: " + "; ".join(parts)] + _ekf_line(summary) + _pitch_line(summary) \
+        + _bias_and_gate(summary)
     lines += [f"warning: {w['message']}" for w in summary["warnings"]]
     return lines

@@ -95,7 +95,7 @@ def settled_nees_check(figures: dict, bounds, per_state: dict | None,
     or its section of another filter), not tested without truth or that hour."""
     why = ("the run is shorter than its first hour, the start-up the check leaves out"
            if figures["nees_mean"] is not None else
-           "the truth holds the attitude only (an AEM: no rates, momentum or torques)"
+           "the truth holds the attitude only: an AEM has no rates, momentum or torques"
            if figures.get("yaw_error_rms_deg") is not None else "no truth to compare with")
     return nees_check(figures.get("nees_mean_after_1h"), bounds, per_state, who=who,
                       why_not=why, after=" after the first hour")
