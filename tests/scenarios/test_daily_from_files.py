@@ -291,7 +291,7 @@ def test_envelopes_of_rows_across_window_boundaries_hold_both_windows(full3, dec
     straddling = [b // STRIDE for b in boundaries if b % STRIDE]
     assert straddling == [1318, 2636]
     enveloped = ("err_real", "err_linear", "err_real_minus_linear", "err_smoothed",
-                 "nees_real", "nees_linear")
+                 "nees_real", "nees_linear", "err_pitch", "nees_pitch")
     assert set(full) | {f"{k}_{m}" for k in enveloped for m in ("min", "max")} \
         | {"output_interval_s"} == set(dec)
     for key in full:
