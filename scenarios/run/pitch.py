@@ -78,8 +78,13 @@ class PitchHistory:
         window's NEES samples (local indices)."""
         values = None if truth is None else nees(r.x[nees_k], unpack(r.P_packed[nees_k]),
                                                  truth[nees_k])
-        return cls(r.x, r.sigma, r.innovations, r.innovation_var, r.backend, values,
-                   r.P_packed if keep_P else None)
+        if keep_P:
+            return cls(r.x, r.sigma, r.innovations, r.innovation_var, r.backend, values,
+                       r.P_packed)
+        # Copies: the result's columns are views of one (N, 11) block, which a view kept
+        # here would hold whole through a streamed window's life.
+        return cls(r.x.copy(), r.sigma, r.innovations.copy(), r.innovation_var.copy(),
+                   r.backend, values)
 
 
 def history_at(r: PitchResult, rows: np.ndarray, truth: np.ndarray | None) -> PitchHistory:

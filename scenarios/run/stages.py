@@ -43,7 +43,7 @@ class Filtered:
     u: np.ndarray
     extra: ExtraNoise | None
     ekf: EkfResult | None
-    pitch: object
+    pitch: PitchHistory
 
 
 def filtered(s: Scenario, records):
@@ -69,8 +69,12 @@ def filtered(s: Scenario, records):
                               sun_head=cur.measured.sun_head)
         prior = (result.x_next, result.P_next)
         e = None if ekf is None else ekf.window(cur, nxt, plan.pad)
-        p = pitch.window(cur.pitch_rad, cur.measured.speeds_radps,
-                         None if nxt is None else nxt.measured.speeds_radps, plan.pad)
+        # Reduced at once to what the files and tallies read (its covariance history
+        # is not kept): the NEES on the NEES samples against the window's truth.
+        p = PitchHistory.of(pitch.window(cur.pitch_rad, cur.measured.speeds_radps,
+                                         None if nxt is None else nxt.measured.speeds_radps,
+                                         plan.pad),
+                            cur.pitch_truth, nees_rows(cur.start, cur.stop) - cur.start)
         # The next window's derivative needs only the last samples of this one.
         prev_tail = cur.measured.cut(slice(-plan.pad, None))
         yield Filtered(cur, result, u, extra, e, p)
@@ -104,7 +108,7 @@ def _lighten(f: Filtered, smoothed_x: np.ndarray | None) -> Smoothed:
                                      real.backend, None, bias_columns(real, slice(None)),
                                      getattr(real, "rejected", None)),
                     nees(real.x[k], unpack(real.P_packed[k]), w.truth_model[k]), smoothed_x,
-                    filters, PitchHistory.of(f.pitch, w.pitch_truth, k))
+                    filters, f.pitch)
 
 
 def smoothed(s: Scenario, records, smooth: bool = True):
