@@ -128,7 +128,8 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     # Off the grid, each step propagates over its own interval (``estimator.steps``).
     disc = (discretize(params, noise, s.sample_interval_s) if grid.regular
             else StepTable(params, noise, grid.steps))
-    real, smoother_args = filter_telemetry(s, params, disc, *telemetry_inputs(s, grid.columns),
+    measured = telemetry_inputs(s, grid.columns)
+    real, smoother_args = filter_telemetry(s, params, disc, *measured,
                                            t_s=None if grid.regular else t)
     smoothed = paper_smoother(design_of(s), real, disc, **smoother_args)
     sparse = truth is not None and not truth.every_sample(n)
@@ -143,7 +144,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     pitch = None
     if "pitch_deg" in grid.columns:
         pitch = run_pitch(s, grid.columns["pitch_deg"] * DEG,
-                          telemetry_inputs(s, grid.columns).speeds_radps,
+                          measured.speeds_radps,
                           None if grid.regular else t)
     pitch_hist = (None if pitch is None else history_at(pitch, truth.rows, p_truth) if sparse
                   else PitchHistory.of(pitch, p_truth, nees_rows(0, n), keep_P=True))
@@ -202,7 +203,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     if sparse and pitch_hist is not None:
         # Its own figures at every sample, its errors where the truth has rows.
         tally = PitchTally(s)
-        tally.add_own(PitchHistory.of(pitch, None, []), t - t[0])
+        tally.add_own(PitchHistory.of(pitch, None, [], keep_P=True), t - t[0])
         tally.add_errors(pitch_hist, 0, t[truth.rows] - t[0], p_truth)
         summary["pitch"] = tally.summary()
     else:
