@@ -30,6 +30,7 @@ from dynprop.sim.truth import InitialState, TruthModel, simulate_truth  # noqa: 
 
 DAY = 86400.0
 EQUINOX = datetime(2026, 3, 20, 12, 0, 0, tzinfo=UTC)
+DYNPROP = str(Path(sys.executable).with_name("dynprop"))
 
 
 def report(name: str, value: float, unit: str) -> None:
@@ -47,13 +48,33 @@ def median_time(fn, repeats: int, warmup: int = 1) -> float:
     return statistics.median(times)
 
 
+def _dynprop(*args) -> None:
+    """A whole `dynprop` command, its output kept back; a failure raises."""
+    subprocess.run([DYNPROP, *map(str, args)], check=True, capture_output=True)
+
+
+def _command_s(*args, repeats: int = 5) -> float:
+    """Median wall time of a whole `dynprop` command, start-up included."""
+    return median_time(lambda: _dynprop(*args), repeats=repeats)
+
+
+def _two_day_run(tmp: str) -> Path:
+    """The default two-day run, made in the scratch directory ``tmp``."""
+    run = Path(tmp) / "run"
+    _dynprop("run", "goes_next_equinox", "--out", run)
+    return run
+
+
+def _year_run(year: Path | None) -> Path | None:
+    """``year``, else $BENCH_YEAR_DIR (a year's run made before), else None."""
+    given = os.environ.get("BENCH_YEAR_DIR")
+    return year if year is not None or not given else Path(given)
+
+
 def cli_wall_s(*args: str, repeats: int = 3) -> float:
     """Median wall time of a whole `dynprop` command writing into a scratch directory."""
-    exe = str(Path(sys.executable).with_name("dynprop"))
     with tempfile.TemporaryDirectory() as tmp:
-        return median_time(lambda: subprocess.run(
-            [exe, *args, "--out", f"{tmp}/run", "--force"], check=True, capture_output=True),
-            repeats=repeats)
+        return _command_s(*args, "--out", f"{tmp}/run", "--force", repeats=repeats)
 
 
 def _tree_memory_mb(proc) -> tuple[float, float]:
@@ -98,10 +119,9 @@ def run_365day(out: Path | None = None) -> tuple[float, float, float, float]:
     wall time, the peak of the summed memory of its processes and the largest single
     process's peak RSS, and the size of the run directory (kept at ``out`` if given,
     for report_figures)."""
-    exe = str(Path(sys.executable).with_name("dynprop"))
     with tempfile.TemporaryDirectory() as tmp:
         out = out or Path(tmp) / "run"
-        wall, total, largest = _watched([exe, "run", "goes_next_equinox", "--duration-s",
+        wall, total, largest = _watched([DYNPROP, "run", "goes_next_equinox", "--duration-s",
                                          str(365 * DAY), "--out", str(out)],
                                         "the one-year run")
         size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) / 1e6
@@ -115,21 +135,15 @@ def report_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
     minutes): its wall time, peak memory and page size (≤ 20 MB); and, with
     chromium installed, the year page's own opening time in the browser, from
     navigation start to every figure drawn (median of 3; target ≤ 3 s)."""
-    exe = str(Path(sys.executable).with_name("dynprop"))
     out = []
     with tempfile.TemporaryDirectory() as tmp:
-        run = Path(tmp) / "run"
-        subprocess.run([exe, "run", "goes_next_equinox", "--out", str(run)], check=True,
-                       capture_output=True)
-        out.append(("report_2day_s", median_time(lambda: subprocess.run(
-            [exe, "report", str(run)], check=True, capture_output=True), repeats=5), "s"))
-        if year is None and os.environ.get("BENCH_YEAR_DIR"):
-            year = Path(os.environ["BENCH_YEAR_DIR"])
+        out.append(("report_2day_s", _command_s("report", _two_day_run(tmp)), "s"))
+        year = _year_run(year)
         if year is None:
             year = Path(tmp) / "year"
             run_365day(year)
-        subprocess.run([exe, "report", str(year)], check=True, capture_output=True)  # warm
-        wall, total, _ = _watched([exe, "report", str(year)], "the year's report")
+        _dynprop("report", year)  # warm
+        wall, total, _ = _watched([DYNPROP, "report", str(year)], "the year's report")
         page = year / "report.html"
         out += [("report_year_s", wall, "s"), ("report_year_peak_rss_MB", total, "MB"),
                 ("report_year_MB", page.stat().st_size / 1e6, "MB")]
@@ -143,52 +157,32 @@ def export_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
     """Issue 33: `dynprop export` as a user runs it (the whole command, start-up
     included): the AEM of the default two-day run's estimate (median of 5; target
     ≤ 1 s) and, given a year's run (``year``, else $BENCH_YEAR_DIR; none is made here),
-    the AEM of its whole year, its wall time and its peak memory (the largest RSS of
-    the command's process, from getrusage in a process of its own), which stays
-    bounded: estimate.csv (140 MB) is read in blocks.  The year's estimate needs
-    ``pitch_deg`` (a run before the pitch filter has none): its truth is exported then,
-    and a note says so."""
-    exe = str(Path(sys.executable).with_name("dynprop"))
+    the AEM of its whole year, its wall time and its peak memory (the process's RSS,
+    ``_watched``), which stays bounded: estimate.csv (140 MB) is read in blocks.  The
+    year's estimate needs ``pitch_deg`` (a run before the pitch filter has none): its
+    truth is exported then, and a note says so."""
     out = []
     with tempfile.TemporaryDirectory() as tmp:
-        run = Path(tmp) / "run"
-        subprocess.run([exe, "run", "goes_next_equinox", "--out", str(run)], check=True,
-                       capture_output=True)
-        what = _exported(run)
-        out.append(("export_2day_s", median_time(lambda: subprocess.run(
-            [exe, "export", str(run), "--format", "aem", "--what", what], check=True,
-            capture_output=True), repeats=5), "s"))
-        if year is None and os.environ.get("BENCH_YEAR_DIR"):
-            year = Path(os.environ["BENCH_YEAR_DIR"])
+        out.append(("export_2day_s", _command_s("export", _two_day_run(tmp), "--format",
+                                                "aem", "--what", "estimate"), "s"))
+        year = _year_run(year)
         if year is not None:
-            what = _exported(year)
-            wall, rss = _peak_rss([exe, "export", str(year), "--format", "aem", "--what",
-                                   what, "--out", f"{tmp}/year.aem"])
+            wall, _, rss = _watched([DYNPROP, "export", str(year), "--format", "aem", "--what",
+                                     _exported(year), "--out", f"{tmp}/year.aem"],
+                                    "the year's export")
             out += [("export_year_s", wall, "s"), ("export_year_peak_rss_MB", rss, "MB")]
     return out
 
 
 def _exported(run: Path) -> str:
-    """``estimate`` when the run's estimate.csv has pitch_deg, else ``truth``."""
+    """``estimate`` when the run's estimate.csv has pitch_deg (a year's run made before
+    the pitch filter has none), else ``truth``."""
     header = (run / "estimate.csv").open().readline().strip().split(",")
     if "pitch_deg" in header:
         return "estimate"
     print(f"bench note: {run}/estimate.csv has no pitch_deg; its truth.csv is exported",
           flush=True)
     return "truth"
-
-
-def _peak_rss(args: list[str]) -> tuple[float, float]:
-    """Wall time and peak RSS (MB) of a command, measured by a Python process of its own
-    (getrusage(RUSAGE_CHILDREN) holds the largest child it waited for: only this one)."""
-    probe = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
-             "subprocess.run(sys.argv[1:], check=True, capture_output=True); "
-             "print(time.perf_counter() - t, "
-             "resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)")
-    text = subprocess.run([sys.executable, "-c", probe, *args], check=True,
-                          capture_output=True, text=True).stdout
-    wall, rss = map(float, text.split())
-    return wall, rss
 
 
 def _page_open_s(page: Path) -> float | None:
@@ -224,11 +218,8 @@ def run_figures_2day_s() -> float:
     """The four `dynprop run` figures of the default two-day run, drawn and saved
     (two at a time, as `dynprop run` does), from its comparison.npz and telemetry."""
     from dynprop.scenarios.figures.run import plot_run_figures
-    exe = str(Path(sys.executable).with_name("dynprop"))
     with tempfile.TemporaryDirectory() as tmp:
-        run = Path(tmp) / "run"
-        subprocess.run([exe, "run", "goes_next_equinox", "--out", str(run)], check=True,
-                       capture_output=True)
+        run = _two_day_run(tmp)
         return median_time(lambda: plot_run_figures(run), repeats=3)
 
 
@@ -464,17 +455,13 @@ def tune_figures() -> list[tuple[str, float, str]]:
     from dynprop.estimator.transition import discretize
     from dynprop.scenarios.tune.fit import TuneOptions, tune
     from dynprop.scenarios.tune.source import read_source
-    exe = str(Path(sys.executable).with_name("dynprop"))
     out = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in TUNE_SCENARIOS:
             run = Path(tmp) / name
-            subprocess.run([exe, "run", name, "--out", str(run)], check=True,
-                           capture_output=True)
+            _dynprop("run", name, "--out", run)
             if name == TUNE_SCENARIOS[0]:
-                out.append(("tune_2day_s", median_time(lambda run=run: subprocess.run(
-                    [exe, "tune", str(run)], check=True, capture_output=True), repeats=3),
-                    "s"))
+                out.append(("tune_2day_s", _command_s("tune", run, repeats=3), "s"))
             src = read_source(run)
             disc = discretize(src.params, src.noise, src.scenario.sample_interval_s)
             fit_t, filter_t = [], []
@@ -493,13 +480,11 @@ def tune_figures() -> list[tuple[str, float, str]]:
 def montecarlo_wall_s(*extra: str, runs: int = 100, repeats: int = 2) -> float:
     """Median wall time of a whole `dynprop montecarlo` set, each into a new
     directory so that nothing is resumed."""
-    exe = str(Path(sys.executable).with_name("dynprop"))
     with tempfile.TemporaryDirectory() as tmp:
         sets = iter(range(repeats))
-        return median_time(lambda: subprocess.run(
-            [exe, "montecarlo", "goes_next_equinox", "--runs", str(runs), "--out",
-             f"{tmp}/set{next(sets)}", *extra], check=True, capture_output=True),
-            repeats=repeats, warmup=0)
+        return median_time(lambda: _dynprop(
+            "montecarlo", "goes_next_equinox", "--runs", runs, "--out", f"{tmp}/set{next(sets)}",
+            *extra), repeats=repeats, warmup=0)
 
 
 if __name__ == "__main__":

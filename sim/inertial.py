@@ -14,43 +14,30 @@ AEM: C_BR = C_{B←EME2000} · (C_RN(t) P(t))ᵀ.
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
-
 import numpy as np
 
 from . import ephemeris, frames
 
 
-def _epoch(epoch) -> datetime:
-    if isinstance(epoch, str):
-        return ephemeris.parse_epoch(epoch)
-    if isinstance(epoch, np.datetime64):
-        epoch = epoch.astype("datetime64[us]").astype(datetime)
-    return epoch if epoch.tzinfo else epoch.replace(tzinfo=UTC)
+def orbit_frame_from_eme2000(t_s, orbit: frames.GeoOrbit, epoch) -> np.ndarray:
+    """C_{R←EME2000} = C_RN(t) · P(t) (N, 3, 3): the orbit frame R against EME2000 at
+    ``t_s`` (s) after ``epoch`` (an aware datetime, ``ephemeris.julian_date``)."""
+    t = np.asarray(t_s, dtype=float)
+    jd0 = ephemeris.julian_date(epoch)
+    return orbit.orbit_frame(t, ephemeris.gmst_rad(jd0)) @ ephemeris.precession_matrix(
+        jd0 + t / 86400.0)
 
 
 def inertial_quaternions(t_s, roll, pitch, yaw, orbit: frames.GeoOrbit, epoch) -> np.ndarray:
     """q_{B←EME2000} (N, 4, scalar-last) from the 3-1-2 angles (rad) at ``t_s`` (s) after
-    ``epoch`` (UTC: a datetime, numpy datetime64 or ISO text)."""
-    t = np.asarray(t_s, dtype=float)
-    jd0 = ephemeris.julian_date(_epoch(epoch))
-    c_bn = frames.dcm_from_euler312(yaw, roll, pitch) @ orbit.orbit_frame(
-        t, ephemeris.gmst_rad(jd0))
-    return frames.quat_from_dcm(c_bn @ ephemeris.precession_matrix(jd0 + t / 86400.0))
+    ``epoch``: C_BR(ψ, φ, θ) · ``orbit_frame_from_eme2000``."""
+    return frames.quat_from_dcm(frames.dcm_from_euler312(yaw, roll, pitch)
+                                @ orbit_frame_from_eme2000(t_s, orbit, epoch))
 
 
 def orbit_frame_quaternions(roll, pitch, yaw) -> np.ndarray:
     """q_BR (N, 4): the attitude against the orbit frame R (CCSDS LVLH_ROTATING)."""
     return frames.quat_from_euler312(yaw, roll, pitch)
-
-
-def orbit_frame_from_eme2000(t_s, orbit: frames.GeoOrbit, epoch) -> np.ndarray:
-    """C_{R←EME2000} = C_RN(t) · P(t) (N, 3, 3): the orbit frame R against EME2000 at
-    ``t_s`` (s) after ``epoch``, the rotation ``inertial_quaternions`` composes with."""
-    t = np.asarray(t_s, dtype=float)
-    jd0 = ephemeris.julian_date(_epoch(epoch))
-    return orbit.orbit_frame(t, ephemeris.gmst_rad(jd0)) @ ephemeris.precession_matrix(
-        jd0 + t / 86400.0)
 
 
 def orbit_frame_from_inertial(t_s, q_bj, orbit: frames.GeoOrbit, epoch) -> np.ndarray:

@@ -16,12 +16,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from dynprop.sim.frames import dcm_from_euler312, dcm_from_quat, euler312_from_quat
+from dynprop.sim.frames import dcm_from_euler312, dcm_from_quat, euler312_from_quat, quat_from_dcm
 
 from ..config import build
 from ..config.schema import Scenario
 from ..files.aem import read_aem
-from ..files.truth_aem import attitude_at, orbit_frame_quaternions_of, stamps_of
+from ..files.truth_aem import orbit_frame_attitude, segment_spans
 from ..units import RAD2DEG
 from .source import Block, ExportError
 
@@ -35,7 +35,6 @@ def _wrapped(a: np.ndarray) -> np.ndarray:
 def rotation_angle(c: np.ndarray) -> np.ndarray:
     """The angle (rad) of each rotation matrix, accurate near zero: 2 atan2(|v|, |w|)
     of its quaternion, not acos of the trace."""
-    from dynprop.sim.frames import quat_from_dcm
     q = quat_from_dcm(c)
     return 2 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
 
@@ -47,7 +46,6 @@ class Comparison:
         self.path = Path(path)
         self.segments = read_aem(self.path)
         self.scenario = s
-        self.epoch = build.epoch(s)
         self.exported = self.compared = 0
         self.angle_sq = 0.0
         self.angle_max = (-1.0, float("nan"))
@@ -57,15 +55,9 @@ class Comparison:
         finite = np.isfinite(b.yaw) & np.isfinite(b.roll) & np.isfinite(b.pitch)
         t = b.t_s[finite]
         self.exported += t.size
-        keep, q, seg_of, _ = attitude_at(self.segments, stamps_of(t, self.epoch))
+        keep, q_br, _ = orbit_frame_attitude(self.segments, t, self.scenario)
         if not keep.size:
             return
-        q_br = np.empty_like(q)
-        for j in np.unique(seg_of):
-            mine = seg_of == j
-            q_br[mine] = orbit_frame_quaternions_of(
-                q[mine], self.segments[j].frame, t[keep][mine], self.scenario,
-                f"{self.path}:{self.segments[j].line}")
         mine = [x[finite][keep] for x in (b.yaw, b.roll, b.pitch)]
         angle = rotation_angle(dcm_from_euler312(*mine)
                                @ np.swapaxes(dcm_from_quat(q_br), -1, -2))
@@ -86,12 +78,10 @@ class Comparison:
         """The figures (degrees), or ``ExportError`` when no exported epoch was inside
         a segment of the file."""
         if not self.compared:
-            spans = ", ".join(f"{a:g} to {b:g} s" for a, b in (
-                seg.seconds_since(self.epoch)[[0, -1]] for seg in self.segments[:3]))
-            raise ExportError(
-                f"{self.path}: no segment ({spans}{', ...' if len(self.segments) > 3 else ''}"
-                f" after {self.scenario.epoch_utc}) covers an exported epoch: nothing to "
-                "compare")
+            spans = segment_spans(self.segments, build.epoch(self.scenario))
+            raise ExportError(f"{self.path}: no segment ({spans} after "
+                              f"{self.scenario.epoch_utc}) covers an exported epoch: nothing "
+                              "to compare")
         n = self.compared
         out = {"file": str(self.path),
                "frame": ", ".join(sorted({seg.frame for seg in self.segments})),

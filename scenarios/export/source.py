@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import closing
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -137,4 +137,4 @@ def open_source(directory: Path | str, what: str = "estimate") -> RunSource:
         s.sample_interval_s
     if not cadence > 0:
         raise ExportError(f"{csv}: t_s does not increase (median step {cadence:g} s)")
-    return RunSource(d, what, csv, s, cadence, skip, case.is_file())
+    return replace(first, cadence_s=cadence)

@@ -33,8 +33,8 @@ from dynprop.sim.inertial import (
 from .. import __version__
 from ..config import build
 from ..files.aem import GAP_FACTOR as AEM_GAP_FACTOR
-from ..files.aem import AemError, AemMeta, AemSegment, write_aem_blocks, write_apm
-from ..files.truth_aem import stamps_of
+from ..files.aem import AemMeta, AemSegment, stamps_of, write_aem_blocks, write_apm
+from ..files.rundir import names_file
 from .compare import Comparison
 from .source import Block, ExportError, RunSource, open_source
 
@@ -129,25 +129,26 @@ def _target(src: RunSource, fmt: str, out, force: bool) -> Path:
 @contextlib.contextmanager
 def _atomic(path: Path) -> Iterator:
     """A text stream to a temporary file beside ``path``, renamed to it at the end;
-    removed if the block fails."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="ascii", newline="\n") as stream:
-            yield stream
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    removed if the block fails.  An OSError names ``path`` (a full disk's names no
+    file: ``rundir.names_file``)."""
+    with names_file(path):
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="ascii", newline="\n") as stream:
+                yield stream
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
+            os.replace(tmp, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
 
 
 def export_run(directory, format: str = "aem", what: str = "estimate",
                frame: str = "inertial", at=None, out=None, truth=None,
-               object_id: str | None = None, force: bool = False,
-               creation_date: str | None = None) -> ExportResult:
+               object_id: str | None = None, force: bool = False) -> ExportResult:
     """Export the run directory's ``what`` as ``format`` (see the module); ``at`` (APM
     only): seconds after epoch_utc or an ISO UTC time; ``truth``: an AEM to compare
     with (``compare``).  Bad input raises ``ExportError`` (or the loader's
@@ -174,43 +175,30 @@ def export_run(directory, format: str = "aem", what: str = "estimate",
         epoch = stamps_of([t_at], build.epoch(src.scenario))[0]
         figures = None if comparison is None else comparison.result()
         with _atomic(path) as stream:
-            write_apm(stream, epoch, q, meta, creation_date=creation_date)
+            write_apm(stream, epoch, q, meta)
         return ExportResult(path, format, what, FRAMES[frame], 1,
                             epoch=str(np.datetime_as_string(epoch, unit="us")),
                             comparison=figures)
 
-    failed: list[BaseException] = []
-
     def quaternion_blocks(blocks):
-        """The blocks as quaternions.  A failure (a bad row half way) ends the stream
-        and is raised once the writer has closed its segment (and its spool file):
-        the temporary file is then dropped."""
+        """The blocks as quaternions.  A failure (a bad row half way) passes through
+        the writer, which closes its spool, and ``_atomic``, which drops the file."""
         last = -np.inf
-        try:
-            for b in blocks:
-                steps = np.diff(np.r_[last, b.t_s])
-                if np.any(~(steps > 0)):
-                    k = int(np.argmax(~(steps > 0)))
-                    raise ExportError(f"{src.csv}: t_s {b.t_s[k]:g} does not follow "
-                                      f"{last if k == 0 else b.t_s[k - 1]:g}: the rows must "
-                                      "increase in time")
-                last = b.t_s[-1] if len(b.t_s) else last
-                if comparison is not None:
-                    comparison.add(b)
-                yield b.t_s, _quaternions(src, b, frame)
-        except Exception as exc:
-            failed.append(exc)
+        for b in blocks:
+            steps = np.diff(np.r_[last, b.t_s])
+            if np.any(~(steps > 0)):
+                k = int(np.argmax(~(steps > 0)))
+                raise ExportError(f"{src.csv}: t_s {b.t_s[k]:g} does not follow "
+                                  f"{last if k == 0 else b.t_s[k - 1]:g}: the rows must "
+                                  "increase in time")
+            last = b.t_s[-1] if len(b.t_s) else last
+            if comparison is not None:
+                comparison.add(b)
+            yield b.t_s, _quaternions(src, b, frame)
 
     with _atomic(path) as stream, contextlib.closing(src.blocks()) as blocks:
-        try:
-            segments = write_aem_blocks(stream, quaternion_blocks(blocks), meta,
-                                        epoch=build.epoch(src.scenario),
-                                        cadence_s=src.cadence_s, creation_date=creation_date)
-        except AemError:
-            if not failed:
-                raise
-        if failed:
-            raise failed[0]
+        segments = write_aem_blocks(stream, quaternion_blocks(blocks), meta,
+                                    epoch=build.epoch(src.scenario), cadence_s=src.cadence_s)
         figures = None if comparison is None else comparison.result()
     return ExportResult(path, format, what, FRAMES[frame], sum(n for *_, n in segments),
                         segments=segments, comparison=figures)

@@ -31,7 +31,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
-from dynprop.sim import ephemeris
+
+from .columns import epoch_ns
 
 INERTIAL_FRAMES = ("EME2000", "J2000", "ICRF", "GCRF")  # ICRF/GCRF: EME2000 to 1.1e-7 rad
 ORBIT_FRAMES = ("LVLH_ROTATING", "LVLH_INERTIAL", "LVLH")
@@ -88,7 +89,7 @@ class AemSegment:
     def interpolate(self, epochs) -> np.ndarray:
         """Lagrange of INTERPOLATION_DEGREE on the components over the degree + 1
         nearest rows (Orekit's window), normalised; inside the segment only."""
-        t, rows = _stamps(epochs).astype(np.int64), self.epochs.astype(np.int64)
+        t, rows = stamps_of(epochs).astype(np.int64), self.epochs.astype(np.int64)
         if t.size and (t.min() < rows[0] or t.max() > rows[-1]):
             raise ValueError("interpolation epochs outside the segment")
         n = min(int(self.meta.get("INTERPOLATION_DEGREE", "1")), len(rows) - 1) + 1
@@ -130,7 +131,7 @@ def write_aem_blocks(out, blocks, meta: AemMeta, *, epoch=None, cadence_s=None,
         stream.write(header)
         state = {"last": None, "q": None, "seg": None, "done": [], "cadence": cadence_s}
         for times, q in blocks:
-            _add_block(stream, state, meta, _stamps(times, epoch), np.asarray(q, float))
+            _add_block(stream, state, meta, stamps_of(times, epoch), np.asarray(q, float))
         _close_segment(stream, state, meta)
         if not state["done"]:
             raise AemError("no finite rows to write: an AEM needs a segment")
@@ -237,7 +238,7 @@ def write_apm(out, epoch, quaternion, meta: AemMeta, *, creation_date=None) -> N
     lines = [_header("APM", replace(meta, version="2.0"), creation_date, None),
              f"OBJECT_NAME = {meta.object_name}", f"OBJECT_ID = {meta.object_id}",
              f"CENTER_NAME = {meta.center_name}", "TIME_SYSTEM = UTC", "",
-             f"EPOCH = {np.datetime_as_string(_stamps(epoch)[0], unit='us')}", "QUAT_START",
+             f"EPOCH = {np.datetime_as_string(stamps_of(epoch)[0], unit='us')}", "QUAT_START",
              f"REF_FRAME_A = {meta.ref_frame_a}", f"REF_FRAME_B = {meta.ref_frame_b}",
              *(f"{k} = {v:.12f}" for k, v in zip(("Q1", "Q2", "Q3", "QC"), q, strict=True)),
              "QUAT_STOP", ""]
@@ -274,10 +275,10 @@ def read_apm(path) -> AemSegment:
                       _oriented(quat, flip), frame, body, 0, header)
 
 
-def read_aem(path, *, gap_factor: float | None = GAP_FACTOR) -> list[AemSegment]:
+def read_aem(path) -> list[AemSegment]:
     """Every segment of an AEM (1.0 or 2.0 KVN), quaternions made scalar-last
     C_{body←frame} (FIRST reordered, B2A conjugated: 1.0 only; 2.0 fixes both).  A step
-    over ``gap_factor`` × the cadence (the header's ``CADENCE_S`` comment, else the
+    over ``GAP_FACTOR`` × the cadence (the header's ``CADENCE_S`` comment, else the
     segment's median step) inside a segment is an error, as is every other breach."""
     name, header, segments, state, meta, rows, note, start = str(path), {}, [], "header", {}, \
         [], "", 0
@@ -293,7 +294,7 @@ def read_aem(path, *, gap_factor: float | None = GAP_FACTOR) -> list[AemSegment]
             if state not in order[line]:
                 raise AemError(f"{name}:{n}: {line} out of place (in the {state} section)")
             if line == "DATA_STOP":
-                segments.append(_segment(name, header, meta, rows, start, note, gap_factor))
+                segments.append(_segment(name, header, meta, rows, start, note))
             meta, start = ({}, n) if line == "META_START" else (meta, start)
             state, rows = {"META_START": "meta", "META_STOP": "meta_done",
                            "DATA_START": "data", "DATA_STOP": "stop"}[line], []
@@ -313,7 +314,7 @@ def read_aem(path, *, gap_factor: float | None = GAP_FACTOR) -> list[AemSegment]
     return segments
 
 
-def _segment(name, header, meta, rows, line, note, gap_factor) -> AemSegment:
+def _segment(name, header, meta, rows, line, note) -> AemSegment:
     frame, body, flip, first, ncol = _convention(name, meta, header.get("CCSDS_AEM_VERS", ""))
     if not rows:
         raise AemError(f"{name}:{line}: the segment has no data rows")
@@ -336,10 +337,10 @@ def _segment(name, header, meta, rows, line, note, gap_factor) -> AemSegment:
         raise AemError(f"{name}:{lines[k]}: epoch {texts[k]} outside START_TIME..STOP_TIME")
     declared = re.search(r"CADENCE_S\s*=\s*([0-9.eE+]+)", note)
     cadence = float(declared.group(1)) if declared else (np.median(steps) if steps.size else 0)
-    if gap_factor is not None and steps.size and steps.max() > gap_factor * cadence:
+    if steps.size and steps.max() > GAP_FACTOR * cadence:
         k = int(np.argmax(steps)) + 1
         raise AemError(f"{name}:{lines[k]}: a gap of {steps[k - 1]:g} s ({texts[k - 1]} to "
-                       f"{texts[k]}) inside the segment of line {line}, over {gap_factor:g} × "
+                       f"{texts[k]}) inside the segment of line {line}, over {GAP_FACTOR:g} × "
                        f"its {cadence:g} s cadence: a dropout must start a new segment")
     q = values[:, [1, 2, 3, 0]] if first else values
     _check_norms(name, q, lines)
@@ -449,11 +450,14 @@ def _datetime64(x) -> np.datetime64:
             raise ValueError(f"{x} has no time zone: give UTC epochs as aware datetimes")
         return np.datetime64(x.astimezone(UTC).replace(tzinfo=None), "ns")
     if isinstance(x, str) and re.search(r"[+-]\d{2}:?\d{2}$", x.strip()):
-        return _datetime64(ephemeris.parse_epoch(x))
+        return epoch_ns(x)
     return np.datetime64(x.strip().rstrip("Z") if isinstance(x, str) else x, "ns")
 
 
-def _stamps(times, epoch=None) -> np.ndarray:
+def stamps_of(times, epoch=None) -> np.ndarray:
+    """datetime64[ns] (UTC) of ``times``: datetime64, aware datetimes, ISO text (a zone
+    converted, none read as UTC), or seconds after ``epoch`` (rounded to the ns), as
+    ``write_aem_blocks`` dates its rows."""
     a = np.atleast_1d(np.asarray(times))
     if a.dtype.kind in "iuf":
         if epoch is None:

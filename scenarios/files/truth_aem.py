@@ -1,6 +1,6 @@
 """An attitude history from another tool, a CCSDS AEM, read back as a truth: for
 `estimate --truth X.aem` (``read_truth_aem``) and `export --truth X.aem`
-(``attitude_at``, ``orbit_frame_quaternions_of``).
+(``orbit_frame_attitude``).
 
 The AEM's quaternions are C_{body←frame} (``aem.read_aem``, whatever the file's
 order and direction).  They are taken to dynprop's orbit frame R with the
@@ -21,7 +21,7 @@ normalised), inside a segment only, never across a dropout between two.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ from dynprop.sim.inertial import orbit_frame_from_inertial
 
 from ..config import build
 from ..config.schema import Scenario
-from .aem import INERTIAL_FRAMES, ORBIT_FRAMES, AemError, AemSegment, read_aem
+from .aem import INERTIAL_FRAMES, AemSegment, read_aem, stamps_of
 from .rundir import RunDirError
 from .truth_file import TruthFromFile
 
@@ -49,13 +49,6 @@ class TruthFromAem(TruthFromFile):
 
     frame: str
     interpolated: int
-
-
-def stamps_of(t_s, epoch: datetime) -> np.ndarray:
-    """datetime64[ns] of ``t_s`` seconds after ``epoch`` (an aware datetime), as
-    ``aem.write_aem_blocks`` dates its rows."""
-    start = np.datetime64(epoch.astimezone(UTC).replace(tzinfo=None), "ns")
-    return start + np.round(np.asarray(t_s, dtype=float) * 1e9).astype("timedelta64[ns]")
 
 
 def attitude_at(segments: list[AemSegment], stamps: np.ndarray
@@ -89,15 +82,27 @@ def attitude_at(segments: list[AemSegment], stamps: np.ndarray
     return keep, q[keep], found[keep], between
 
 
-def orbit_frame_quaternions_of(q: np.ndarray, frame: str, t_s: np.ndarray, s: Scenario,
-                               where: str) -> np.ndarray:
-    """q_BR from C_{body←frame} at ``t_s`` after the scenario's epoch, with its orbit."""
-    if frame in ORBIT_FRAMES:
-        return np.asarray(q, dtype=float)
-    if frame in INERTIAL_FRAMES:
-        return orbit_frame_from_inertial(t_s, q, build.orbit(s), build.epoch(s))
-    raise AemError(f"{where}: REF_FRAME {frame} is not one dynprop converts to its orbit "
-                   f"frame ({', '.join(INERTIAL_FRAMES + ORBIT_FRAMES)})")
+def orbit_frame_attitude(segments: list[AemSegment], t_s, s: Scenario
+                         ) -> tuple[np.ndarray, np.ndarray, int]:
+    """(indices into ``t_s`` (s after the scenario's epoch) inside a segment, q_BR there,
+    how many were interpolated): ``attitude_at``, and a segment in an inertial frame
+    taken to the orbit frame R with the scenario's orbit (``orbit_frame_from_inertial``);
+    an LVLH frame, the only other ``read_aem`` gives, is R."""
+    t_s = np.asarray(t_s, dtype=float)
+    epoch = build.epoch(s)
+    keep, q, seg_of, between = attitude_at(segments, stamps_of(t_s, epoch))
+    for j in np.unique(seg_of):
+        if segments[j].frame in INERTIAL_FRAMES:
+            mine = seg_of == j
+            q[mine] = orbit_frame_from_inertial(t_s[keep][mine], q[mine], build.orbit(s), epoch)
+    return keep, q, between
+
+
+def segment_spans(segments: list[AemSegment], epoch: datetime) -> str:
+    """The first segments' spans in s after ``epoch``, for a message: ``0 to 10752 s``."""
+    spans = ", ".join(f"{a:g} to {b:g} s" for a, b in (
+        seg.seconds_since(epoch)[[0, -1]] for seg in segments[:3]))
+    return spans + (", ..." if len(segments) > 3 else "")
 
 
 def read_truth_aem(path: Path, s: Scenario, t_grid: np.ndarray, on_grid: bool = True
@@ -113,7 +118,7 @@ def read_truth_aem(path: Path, s: Scenario, t_grid: np.ndarray, on_grid: bool = 
     path = Path(path)
     segments = read_aem(path)
     t_grid = np.asarray(t_grid, dtype=float)
-    stamps = stamps_of(t_grid, build.epoch(s))
+    rows = np.arange(len(t_grid))
     if on_grid:
         file_t = np.concatenate([seg.seconds_since(build.epoch(s)) for seg in segments])
         dt, t0 = s.sample_interval_s, float(t_grid[0])
@@ -121,26 +126,14 @@ def read_truth_aem(path: Path, s: Scenario, t_grid: np.ndarray, on_grid: bool = 
         ok = (k >= 0) & (k < len(t_grid)) & (np.abs(file_t - (t0 + k * dt)) <= EPOCH_MATCH_S)
         if ok.any():
             rows = np.unique(k[ok].astype(np.int64))
-            stamps = stamps[rows]
-        else:
-            rows = np.arange(len(t_grid))
-    else:
-        rows = np.arange(len(t_grid))
-    keep, q, seg_of, between = attitude_at(segments, stamps)
+    keep, q_br, between = orbit_frame_attitude(segments, t_grid[rows], s)
     rows = rows[keep]
     if not len(rows):
-        spans = ", ".join(f"{a:g} to {b:g} s" for a, b in (
-            seg.seconds_since(build.epoch(s))[[0, -1]] for seg in segments[:3]))
         raise RunDirError(
-            f"{path}: no segment ({spans}{', ...' if len(segments) > 3 else ''} after "
+            f"{path}: no segment ({segment_spans(segments, build.epoch(s))} after "
             f"{s.epoch_utc}) covers a time of the filter's grid ({t_grid[0]:g} to "
             f"{t_grid[-1]:g} s), so no error can be computed")
     t_rows = t_grid[rows]
-    q_br = np.empty_like(q)
-    for j in np.unique(seg_of):
-        mine = seg_of == j
-        q_br[mine] = orbit_frame_quaternions_of(q[mine], segments[j].frame, t_rows[mine], s,
-                                                f"{path}:{segments[j].line}")
     euler = np.column_stack(euler312_from_quat(q_br))
     n = len(rows)
     frames = sorted({seg.frame for seg in segments})

@@ -46,25 +46,12 @@ def numbers(path: Path) -> dict[str, np.ndarray]:
     return {n: data[:, k] for k, n in enumerate(names)}
 
 
-def with_pitch(d: Path) -> None:
-    """Until the run writes pitch_deg into estimate.csv, put the truth's there (only
-    the wiring is tested with it)."""
-    est = (d / "estimate.csv").read_text().splitlines()
-    if "pitch_deg" in est[0].split(","):
-        return
-    pitch = (d / "truth.csv").read_text().splitlines()
-    k = pitch[0].split(",").index("pitch_deg")
-    rows = [a + "," + b.split(",")[k] for a, b in zip(est, pitch, strict=True)]
-    (d / "estimate.csv").write_text("\n".join(rows) + "\n")
-
-
 @pytest.fixture(scope="module")
 def run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("export") / "run"
     rc, _, err = run_cli("run", "goes_next_equinox", "--duration-s", str(DURATION),
                          "--out", str(out))
     assert rc == 0, err
-    with_pitch(out)
     return out
 
 
