@@ -23,6 +23,7 @@ from .results import (
     SimulationResult,
     TextReport,
     TuneResult,
+    export_directory,
 )
 
 __all__ = ["ExportError", "ScenarioError", "batch", "covariance", "export", "linearization",
@@ -124,10 +125,8 @@ def export(path, format: str = "aem", what: str = "estimate", frame: str = "iner
 
     Returns an ``ExportResult``; bad input raises ``ExportError`` (or ``ScenarioError``,
     ``AemError``) with the CLI's one-line message, and writes nothing."""
-    from dynprop.scenarios.export.write import export_run
-    return export_run(Path(getattr(path, "path", path)), format, what, frame, at,
-                      None if out is None else Path(out),
-                      None if truth is None else Path(truth), object_id, force)
+    return export_directory(Path(getattr(path, "path", path)), format, what, frame, at, out,
+                            truth, object_id, force)
 
 
 def open_run(path: str | Path):
@@ -175,7 +174,8 @@ def linearization(scenario: Scenario | str) -> LinearizationResult:
 def observability(scenario: Scenario | str, biases: str = "scenario") -> TextReport:
     """Section 4's rank tables (`dynprop observability`), with the sensor-bias states the
     scenario switches on (``biases="all"``: all four, as ``--biases all``)."""
-    from dynprop.estimator.observability import BIAS_NAMES, format_rank_table
+    from dynprop.estimator.analysis.observability import format_rank_table
+    from dynprop.estimator.augmented.model import BIAS_NAMES
     from dynprop.scenarios.config.build import estimator_model
     s = _scenario(scenario)
     params, _ = estimator_model(s)
@@ -186,7 +186,7 @@ def observability(scenario: Scenario | str, biases: str = "scenario") -> TextRep
 def covariance(scenario: Scenario | str) -> TextReport:
     """Section 6's steady-state yaw σ by every method against the paper's 0.040°
     (`dynprop covariance`); ``.data`` is the report's dict."""
-    from dynprop.estimator.covariance_report import format_covariance_report
+    from dynprop.estimator.analysis.covariance_report import format_covariance_report
     from dynprop.scenarios.bridge.covariance import scenario_covariance_report
     report = scenario_covariance_report(_scenario(scenario))
     return TextReport(format_covariance_report(report), report)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from dynprop.scenarios.export.write import ExportResult  # noqa: F401 (dynprop.ExportResult)
+from dynprop.scenarios.export.write import ExportResult, export_run
 from dynprop.scenarios.files.columns import STATE_COLUMNS
 from dynprop.scenarios.files.csvio import read_csv
 from dynprop.scenarios.files.rundir import staged_run_dir
@@ -30,6 +30,16 @@ def _table(path: Path) -> pd.DataFrame | None:
     cols = read_csv(path)
     index = pd.Index(cols.pop("t_s"), name="t_s") if "t_s" in cols else None
     return pd.DataFrame(cols, index=index)
+
+
+def export_directory(path: Path, format, what, frame, at, out, truth, object_id,
+                     force) -> ExportResult:
+    """``dynprop.export`` and ``Result.export``: `dynprop export` on a directory, the
+    paths given as text or ``Path``.  Here rather than in ``api`` so that ``api``
+    imports ``results`` and never the other way round."""
+    return export_run(Path(path), format, what, frame, at,
+                      None if out is None else Path(out),
+                      None if truth is None else Path(truth), object_id, force)
 
 
 def _png_figure(path: Path):
@@ -95,8 +105,8 @@ class SimulationResult(_Directory):
         """The attitude as a CCSDS AEM or APM, as `dynprop export` (``dynprop.export``):
         written into the directory (``estimate.aem``, ...; ``save`` copies it too)
         unless ``out``; returns an ``ExportResult``."""
-        from .api import export
-        return export(self, format, what, frame, at, out, truth, object_id, force)
+        return export_directory(self.path, format, what, frame, at, out, truth, object_id,
+                                force)
 
 
 class RunResult(SimulationResult):
