@@ -226,7 +226,7 @@ def run_figures_2day_s() -> float:
 def discretize_ms() -> float:
     """Φ, Γ and Q_d of the paper's model at 0.512 s (Eqs. 15–23, 31–32), the best of
     200 calls: the filter is rebuilt from these for every run and Monte Carlo case."""
-    from dynprop.estimator.transition import discretize
+    from dynprop.estimator.linear.transition import discretize
     from dynprop.scenarios.config.build import estimator_model
     params, noise = estimator_model(load_scenario("goes_next_equinox"))
     discretize(params, noise, 0.512)
@@ -239,7 +239,7 @@ def discretize_ms() -> float:
 
 
 def _filter_day():
-    from dynprop.estimator.kalman import Measurements
+    from dynprop.estimator.kalman.filter import Measurements
     from dynprop.scenarios.config.build import estimator_model
     params, noise = estimator_model(load_scenario("goes_next_equinox", ["duration_s=86400"]))
     n = 168_750
@@ -254,8 +254,8 @@ def _filter_day():
 
 def filter_s_per_day() -> float:
     """The paper's filter over one day of 0.512 s samples (as in ``main``)."""
-    from dynprop.estimator.kalman import kalman_filter
-    from dynprop.estimator.transition import discretize
+    from dynprop.estimator.kalman.filter import kalman_filter
+    from dynprop.estimator.linear.transition import discretize
     params, noise, meas, x0, P0, _ = _filter_day()
     disc = discretize(params, noise, 0.512)
     return median_time(lambda: kalman_filter(meas, disc, x0, P0), repeats=5)
@@ -263,9 +263,9 @@ def filter_s_per_day() -> float:
 
 def filter_jitter_s_per_day() -> float:
     """The filter over the same day with ±50 ms jitter on every time tag: every step's
-    Φ, Γ, Q_d evaluated from the closed forms (``estimator.steps``), included."""
-    from dynprop.estimator.kalman import kalman_filter
-    from dynprop.estimator.steps import StepTable
+    Φ, Γ, Q_d evaluated from the closed forms (``estimator.linear.steps``), included."""
+    from dynprop.estimator.kalman.filter import kalman_filter
+    from dynprop.estimator.linear.steps import StepTable
     params, noise, meas, x0, P0, rng = _filter_day()
     n = len(meas.roll_rad)
     t = np.arange(n) * 0.512 + rng.uniform(-0.05, 0.05, n)
@@ -276,9 +276,9 @@ def filter_jitter_s_per_day() -> float:
 def ekf_over_filter() -> float:
     """ekf_s_per_day / filter_s_per_day, each the median of 7 one-day runs on the same
     synthetic day, taken in turn (issue 16's target: ≤ 4)."""
-    from dynprop.estimator.ekf import EkfInputs, ekf_filter
-    from dynprop.estimator.kalman import Measurements, kalman_filter
-    from dynprop.estimator.transition import discretize
+    from dynprop.estimator.ekf.filter import EkfInputs, ekf_filter
+    from dynprop.estimator.kalman.filter import Measurements, kalman_filter
+    from dynprop.estimator.linear.transition import discretize
     from dynprop.scenarios.bridge.ekf import ekf_design
     from dynprop.scenarios.config.build import estimator_model
     scenario = load_scenario("goes_next_equinox", ["duration_s=86400"])
@@ -310,8 +310,8 @@ def batch_figures() -> list[tuple[str, float, str]]:
     ``batch_over_filter``: that over one pass of the paper's filter on the same
     telemetry, the two timed in turn, 5 times (target ≤ 30, moonshot ≤ 8); also the
     linear batch."""
-    from dynprop.estimator.kalman import kalman_filter
-    from dynprop.estimator.transition import discretize
+    from dynprop.estimator.kalman.filter import kalman_filter
+    from dynprop.estimator.linear.transition import discretize
     from dynprop.scenarios.batch.spans import solve_spans
     from dynprop.scenarios.bridge.inputs import filter_inputs, initial_prior, measured
     from dynprop.scenarios.config.build import estimator_model
@@ -375,8 +375,8 @@ def main() -> None:
     report("simulate_2day_wall_s", cli_wall_s("simulate", "goes_next_equinox"), "s")
 
     # Issue 4: the filter over one day, roll and h every step, yaw two thirds of it.
-    from dynprop.estimator.kalman import Measurements, dense_filter, kalman_filter
-    from dynprop.estimator.transition import discretize
+    from dynprop.estimator.kalman.filter import Measurements, dense_filter, kalman_filter
+    from dynprop.estimator.linear.transition import discretize
     params, noise, meas, x0, P0, rng = _filter_day()
     disc = discretize(params, noise, 0.512)
     n, yaw = len(meas.roll_rad), meas.yaw_rad
@@ -386,7 +386,7 @@ def main() -> None:
     report("filter_jitter_s_per_day", filter_jitter_s_per_day(), "s")
     # Issue 16: the extended Kalman filter on the same day, pitch measured like roll;
     # its target is a ratio to filter_s_per_day of the same bench run (≤ 4×).
-    from dynprop.estimator.ekf import EkfInputs, ekf_filter
+    from dynprop.estimator.ekf.filter import EkfInputs, ekf_filter
     from dynprop.scenarios.bridge.ekf import ekf_design
     pm, wn, X0, P0e = ekf_design(scenario)
     ekf_in = EkfInputs(
@@ -451,8 +451,8 @@ def tune_figures() -> list[tuple[str, float, str]]:
     `estimate` call it) over the same telemetry, medians taken in turn.  The
     default scenario, whose truth lies outside the filter's noise model (its
     likelihood is flat along most parameters), gets its ratio too."""
-    from dynprop.estimator.kalman import kalman_filter
-    from dynprop.estimator.transition import discretize
+    from dynprop.estimator.kalman.filter import kalman_filter
+    from dynprop.estimator.linear.transition import discretize
     from dynprop.scenarios.tune.fit import TuneOptions, tune
     from dynprop.scenarios.tune.source import read_source
     out = []

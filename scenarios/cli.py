@@ -272,7 +272,8 @@ def _cmd_tune(args) -> int:
 
 
 def _cmd_observability(args) -> int:
-    from dynprop.estimator.observability import BIAS_NAMES, format_rank_table
+    from dynprop.estimator.analysis.observability import format_rank_table
+    from dynprop.estimator.augmented.model import BIAS_NAMES
 
     from .config.build import estimator_model
     s = load_with_overrides(args)
@@ -283,7 +284,7 @@ def _cmd_observability(args) -> int:
 
 
 def _cmd_covariance(args) -> int:
-    from dynprop.estimator.covariance_report import format_covariance_report
+    from dynprop.estimator.analysis.covariance_report import format_covariance_report
 
     from .bridge.covariance import scenario_covariance_report
     print(format_covariance_report(scenario_covariance_report(load_with_overrides(args))))
@@ -394,7 +395,7 @@ INPUT_ERRORS = (("dynprop.scenarios.files.rundir", "RunDirError"),
                 ("dynprop.scenarios.montecarlo", "SchedulerError"),
                 ("dynprop.scenarios.trim.batch", "TrimError"),
                 ("dynprop.scenarios.tune.source", "TuneError"),
-                ("dynprop.estimator.batch", "BatchError"),
+                ("dynprop.estimator.batch.linear", "BatchError"),
                 ("dynprop.scenarios.export.source", "ExportError"),
                 ("dynprop.scenarios.files.aem", "AemError"))
 

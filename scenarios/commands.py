@@ -13,7 +13,7 @@ from pathlib import Path
 from .config.schema import Scenario
 from .files.simulation import write_simulation
 from .run.simulate import Simulation, simulate
-from .run.streamrun import stream_to_directory
+from .run.stream.directory import stream_to_directory
 
 
 def simulate_to_directory(s: Scenario, stage: Path) -> Simulation:
@@ -26,7 +26,7 @@ def simulate_to_directory(s: Scenario, stage: Path) -> Simulation:
 def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = None) -> dict:
     """Everything of one `dynprop run` into ``stage``; returns the summary.
 
-    A plain run streams in windows (``run.streamrun``), steered by the trim loop when
+    A plain run streams in windows (``run.stream.directory``), steered by the trim loop when
     the scenario closes it (``trim.every_days``).  With ``montecarlo_case`` K the
     spacecraft that flies is case K of the scenario's dispersions, every sample kept
     (``montecarlo.case_dir``)."""

@@ -1,7 +1,7 @@
 """The typed records that pass between rooms: a window of a streamed run, from the
 producer's truth and telemetry to what the filters leave of it.
 
-``dynprop run`` streams (``run.stream``): the producer process hands the consumer a
+``dynprop run`` streams (``run.stream.windows``): the producer process hands the consumer a
 ``TruthWindow`` as soon as a window's truth and telemetry exist and a ``TwinWindow``
 once the linear twin and its filter are through it; the consumer's stages filter
 and smooth the truth window and join the two into a ``Window``, which the tallies
@@ -16,7 +16,7 @@ from dataclasses import dataclass, fields
 from typing import NamedTuple
 
 import numpy as np
-from dynprop.estimator.model import ModelParams
+from dynprop.estimator.linear.model import ModelParams
 
 
 class Measured(NamedTuple):

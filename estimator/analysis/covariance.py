@@ -1,4 +1,5 @@
-"""Steady-state yaw accuracy (Section 6, Eqs. 39–56) and the measurement variances.
+"""Steady-state yaw accuracy (Section 6, Eqs. 39–56), from the measurement variances
+of ``linear.noise``.
 
 Four routes to σ_yaw, from the paper's closed form to the discrete filter:
 
@@ -35,86 +36,27 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm, solve_continuous_are, solve_discrete_are
 
-from .model import H_WHEEL, ModelParams, ProcessNoise, R, Y, dynamics_matrix, noise_density
+from ..linear.model import (
+    H_WHEEL,
+    ModelParams,
+    ProcessNoise,
+    R,
+    Y,
+    dynamics_matrix,
+    noise_density,
+)
+from ..linear.noise import (
+    PAPER_SENSORS,
+    SensorSpecs,
+    continuous_R,
+    h_variance,
+    ripple_noise_density,
+    roll_variance,
+    yaw_variance,
+)
 
-SIDEREAL_DAY_S = 86164.0905
 PAPER_SIGMA_YAW_DEG = 0.040          # Eq. 56
 PAPER_SIGMA_YAW_RAD = 6.9e-4         # Eq. 56
-RPM = 2 * np.pi / 60
-
-
-@dataclass(frozen=True)
-class SensorSpecs:
-    """Sections 2.1 and 2.3; yaw is the DSS's (the paper gives the filter none; errata 7)."""
-
-    dt_s: float = 0.512
-    tach_quantum_rpm: float = 0.0163
-    tach_noise_3sigma_rpm: float = 0.0978
-    roll_noise_deg: float = 0.01
-    roll_quantum_deg: float = 0.01
-    yaw_noise_deg: float = 0.0042
-    yaw_quantum_deg: float = 0.125
-    wheel_inertia_kgm2: float = 0.1082
-    cant_deg: float = 1.656
-    # Σ k_i² with h = Σ k_i Ω_i (k_i = I_w,i a_i·ẑ); None means the two canted wheels,
-    # 2 (I_w sin c)².  The backup configuration's yaw reaction wheel needs its own.
-    h_factor_sq_sum: float | None = None
-
-
-def quantized_variance(sigma: float, quantum: float) -> float:
-    """σ² + quantum²/12: noise plus uniform quantisation error (Eqs. 46–47)."""
-    return sigma**2 + quantum**2 / 12.0
-
-
-def tach_variance(s: SensorSpecs = SensorSpecs()) -> float:
-    """R_tach of Eq. 46, (rad/s)², per wheel."""
-    return quantized_variance(s.tach_noise_3sigma_rpm / 3.0, s.tach_quantum_rpm) * RPM**2
-
-
-def roll_variance(s: SensorSpecs = SensorSpecs()) -> float:
-    """R_roll of Eq. 47, rad²."""
-    return quantized_variance(s.roll_noise_deg, s.roll_quantum_deg) * (np.pi / 180) ** 2
-
-
-def yaw_variance(s: SensorSpecs = SensorSpecs()) -> float:
-    """Sun-sensor yaw variance, rad² (the rule of Eq. 47)."""
-    return quantized_variance(s.yaw_noise_deg, s.yaw_quantum_deg) * (np.pi / 180) ** 2
-
-
-def h_variance(s: SensorSpecs = SensorSpecs()) -> float:
-    """Variance of h = Σ k_i Ω_i from the tachometers, (N m s)²: Σ k_i² R_tach, which for
-    the two canted wheels of Eq. 2 is 2 (I_w sin c)² R_tach."""
-    k2 = s.h_factor_sq_sum
-    if k2 is None:
-        k2 = 2.0 * (s.wheel_inertia_kgm2 * np.sin(np.deg2rad(s.cant_deg))) ** 2
-    return k2 * tach_variance(s)
-
-
-def combined_variance(H_Nms: float, s: SensorSpecs = SensorSpecs()) -> float:
-    """R_k of Eq. 48: the variance of the measured x̃1 = r + h/H."""
-    return roll_variance(s) + h_variance(s) / H_Nms**2
-
-
-def continuous_R(H_Nms: float, s: SensorSpecs = SensorSpecs()) -> float:
-    """R = R_k Δt of Eq. 51, rad² s."""
-    return combined_variance(H_Nms, s) * s.dt_s
-
-
-def torque_noise_density(torque_Nm: float = 5e-6, correlation_s: float = SIDEREAL_DAY_S / 4):
-    """q of Eq. 45: mean-square torque error × correlation time (a quarter orbit)."""
-    return torque_Nm**2 * correlation_s
-
-
-def ripple_noise_density(psd_per_hz: float = 6e-7, cant_deg: float = 1.656,
-                         paper: bool = False) -> float:
-    """q_w of Eq. 44 for two wheels of one-sided ripple PSD G (N m)²/Hz.
-
-    ``paper=True``: the printed expression 2 sin²c G/2π (1.595e-10, printed
-    1.3e-10).  Default: the white-noise intensity of Eq. 35, 2 sin²c G/2 (5.0e-10),
-    as the truth model uses (docs/paper-errata.md entry 6).
-    """
-    return 2 * np.sin(np.deg2rad(cant_deg)) ** 2 * psd_per_hz / (2 * np.pi if paper else 2.0)
-
 
 # --- the nutation-averaged 2-state model (Eqs. 40–55) ---------------------------------
 
@@ -192,7 +134,7 @@ def reduced(P: np.ndarray, p: ModelParams) -> np.ndarray:
 
 
 def roll_tach_steady_state(p: ModelParams, noise: ProcessNoise,
-                           sensors: SensorSpecs = SensorSpecs(), method: str = "dare") -> dict:
+                           sensors: SensorSpecs = PAPER_SENSORS, method: str = "dare") -> dict:
     """Discrete steady state of the 5-state model with roll and h every Δt.
 
     ``method="dare"``: ``solve_discrete_are``; ``"doubling"``: the limit of the
@@ -278,7 +220,7 @@ class GapResult:
 
 
 def periodic_gap_covariance(p: ModelParams, noise: ProcessNoise,
-                            sensors: SensorSpecs = SensorSpecs(), *, gap_s: float = 28800.0,
+                            sensors: SensorSpecs = PAPER_SENSORS, *, gap_s: float = 28800.0,
                             period_s: float = 86400.0, sample_s: float = 600.0,
                             tol: float = 1e-10) -> GapResult:
     """σ_yaw over a day of the 9-state filter: roll and h every Δt, yaw 16 h of 24 h.
@@ -321,7 +263,7 @@ def periodic_gap_covariance(p: ModelParams, noise: ProcessNoise,
     return GapResult(np.array(times), np.array(sig), np.outer(s, s) * P, days)
 
 
-def sigma_yaw_sweep(q_values, p: ModelParams, sensors: SensorSpecs = SensorSpecs(),
+def sigma_yaw_sweep(q_values, p: ModelParams, sensors: SensorSpecs = PAPER_SENSORS,
                     q_w: float | None = None) -> dict:
     """σ_yaw (rad) against q = q_x = q_z: Eq. 55, Eq. 54, and the discrete filter (a priori).
 

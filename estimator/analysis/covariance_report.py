@@ -7,26 +7,27 @@ from dataclasses import replace
 
 import numpy as np
 
-from .covariance import (
-    PAPER_SIGMA_YAW_DEG,
+from ..linear.model import ModelParams, ProcessNoise
+from ..linear.noise import (
+    PAPER_SENSORS,
     SensorSpecs,
-    alpha,
-    approx_yaw_variance,
-    care_steady_state,
-    closed_form_steady_state,
     combined_variance,
     continuous_R,
     h_variance,
-    periodic_gap_covariance,
-    reduced,
-    roll_tach_steady_state,
     roll_variance,
     tach_variance,
     yaw_variance,
 )
-from .model import ModelParams, ProcessNoise
-
-PAPER_SENSORS = SensorSpecs()   # Sections 2.1 and 2.3
+from .covariance import (
+    PAPER_SIGMA_YAW_DEG,
+    alpha,
+    approx_yaw_variance,
+    care_steady_state,
+    closed_form_steady_state,
+    periodic_gap_covariance,
+    reduced,
+    roll_tach_steady_state,
+)
 
 METHODS = {
     "eq54": "Eq. 54 closed form",

@@ -43,8 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .augmented_steps import BIAS_NAMES
-from .model import NCZ, STATE_NAMES, ModelParams, Y, dynamics_matrix, measurement_rows
+from ..augmented.model import BIAS_NAMES, augmented_dynamics, augmented_rows
+from ..linear.model import NCZ, STATE_NAMES, ModelParams, Y, dynamics_matrix, measurement_rows
 
 
 def default_tol(n_rows: int, n_states: int) -> float:
@@ -240,7 +240,8 @@ def format_rank_table(p: ModelParams, tol: float | None = None, biases=()) -> st
 
 # ------------------------------------------------------------------ sensor-bias states
 #
-# Not in the paper: the state augmented with sensor biases b (``augmented``'s filter),
+# Not in the paper: the state augmented with sensor biases b (``augmented``'s filter;
+# its F_a and rows are ``augmented.model``'s),
 # x_a = [x (Eq. 10), b].  A bias has no dynamics (a constant, or a random walk whose
 # noise does not enter observability), so F_a = blockdiag(F, 0); it adds to its
 # sensor's measurement row: roll = e_r + e_earth_roll, yaw from a head = e_y + e_<head>_yaw,
@@ -249,32 +250,7 @@ def format_rank_table(p: ModelParams, tol: float | None = None, biases=()) -> st
 # unobservable subspace is F_a-invariant (so e^{F_a t}-invariant), hence what neither
 # span sees is the intersection, the null space of the stacked rows' matrix.
 
-HEADS = ("dss", "cass1", "cass2")          # yaw from head h carries bias f"{h}_yaw"
 _CLEAN = 1e-6   # entries of a scaled null vector below this are rounding (see _directions)
-
-
-def augmented_dynamics(F, n_biases: int) -> np.ndarray:
-    """F_a = blockdiag(F, 0_{n_biases})."""
-    F = np.asarray(F, dtype=float)
-    n = F.shape[0]
-    Fa = np.zeros((n + n_biases, n + n_biases))
-    Fa[:n, :n] = F
-    return Fa
-
-
-def augmented_rows(kinds, biases, keep=None) -> np.ndarray:
-    """Measurement rows on [x, b] (x the paper's states ``keep``, default all nine; b
-    the ``biases``, in ``BIAS_NAMES`` order): 'roll', 'h' and 'yaw:<head>'."""
-    keep = list(range(len(STATE_NAMES))) if keep is None else list(keep)
-    rows = measurement_rows()
-    G = np.zeros((len(kinds), len(keep) + len(biases)))
-    for i, kind in enumerate(kinds):
-        base, _, head = kind.partition(":")
-        G[i, :len(keep)] = rows[base][keep]
-        bias = "earth_roll" if base == "roll" else f"{head}_yaw" if base == "yaw" else None
-        if bias in biases:
-            G[i, len(keep) + list(biases).index(bias)] = 1.0
-    return G
 
 
 @dataclass(frozen=True)

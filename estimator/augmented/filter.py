@@ -12,13 +12,13 @@ flagged instead of applied, so one spike cannot pull an estimate that takes hour
 to recover (the slow torque states and the biases remember it).
 
 What the data cannot separate (``augmented_model`` and ``measurement_row`` give F_a
-and G for ``estimator.observability``): a constant roll offset δ held by the constant
+and G for ``estimator.analysis.observability``): a constant roll offset δ held by the constant
 torque N_cx = −ω0 H δ (Eq. 11) reads as r + b unchanged when b = −δ, so with roll, yaw
 and h the augmented model has rank 9 of 10 per such bias (likewise yaw, N_cz and a yaw
 bias), and a constant bias is known only as well as the prior on the constant torque
 allows; a second head without a bias state, seen as well, makes a yaw bias observable.
 The steps are compiled
-(``augmented_steps``); ``dense_augmented_filter`` and ``dense_augmented_smoother``
+(``augmented.steps``); ``dense_augmented_filter`` and ``dense_augmented_smoother``
 are plain-numpy references for the tests.
 """
 
@@ -28,18 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .augmented_steps import (
-    BIAS_NAMES,
-    N_MEAS,
-    YAW_HEADS,
-    engine,
-    n_packed,
-    yaw_bias_columns,
-)
-from .kalman import ExtraNoise, Measurements, _extra, _inputs
-from .kalman_steps import pack_params
-from .model import N_STATES, ModelParams, dynamics_matrix
-from .observability import augmented_dynamics, augmented_rows
+from ..kalman.filter import ExtraNoise, Measurements, _extra, _inputs
+from ..kalman.steps import pack_params
+from ..linear.model import N_STATES, ModelParams, dynamics_matrix
+from .model import BIAS_NAMES, YAW_HEADS, augmented_dynamics, augmented_rows
+from .steps import N_MEAS, engine, n_packed, yaw_bias_columns
 
 
 @dataclass(frozen=True)
@@ -165,7 +158,7 @@ def _prior(x0, P0, bias) -> tuple[np.ndarray, np.ndarray]:
 def augmented_params(disc, bias: BiasModel | None, Qd_unit=None,
                      gate_chi2: float | None = None) -> np.ndarray:
     """The steps' parameter vector for one step length: the paper step's
-    (``kalman_steps.pack_params``: Φ, Γ, Q_d, Q_e), each bias's q_b Δt (Eq. 32 for a
+    (``kalman.steps.pack_params``: Φ, Γ, Q_d, Q_e), each bias's q_b Δt (Eq. 32 for a
     random walk), and γ when gating.  A run of several Δt calls it once per segment."""
     walk = np.asarray(bias.walk_rad2ps if _names(bias) else (), dtype=float) * disc.dt
     gate = () if gate_chi2 is None else (_gate(gate_chi2),)
@@ -329,7 +322,7 @@ def measurement_row(bias: BiasModel | None, kind: str, head: int | None = None
 
 def augmented_model(p: ModelParams, bias: BiasModel | None) -> np.ndarray:
     """F_a = blockdiag(F (Eq. 11b), 0): the biases are constant between noise, for
-    ``estimator.observability`` with rows from ``measurement_row``."""
+    ``estimator.analysis.observability`` with rows from ``measurement_row``."""
     return augmented_dynamics(dynamics_matrix(p), len(_names(bias)))
 
 

@@ -1,5 +1,5 @@
 """The compiled steps of the filter with sensor-bias states and outlier gating
-(``augmented``): the paper's step (``kalman_steps``) on the state [x (Eq. 10), b],
+(``augmented``): the paper's step (``kalman.steps``) on the state [x (Eq. 10), b],
 b the chosen sensor biases, each one CasADi function built once per bias set and
 gating choice and rolled out by ``rollout``.
 
@@ -18,11 +18,10 @@ import casadi as ca
 import numpy as np
 from dynprop.rollout.chunks import ChunkedRollout
 
-from .kalman_steps import N_UT, _cholesky_solve, _sparse_sym, _unpack_sym
-from .model import H_WHEEL, N_STATES, R, Y
+from ..kalman.steps import N_UT, _cholesky_solve, _sparse_sym, _unpack_sym
+from ..linear.model import H_WHEEL, N_STATES, R, Y
+from .model import YAW_HEADS
 
-BIAS_NAMES = ("earth_roll", "dss_yaw", "cass1_yaw", "cass2_yaw")
-YAW_HEADS = ("dss_yaw", "cass1_yaw", "cass2_yaw")   # sun_head code 0, 1, 2
 N_MEAS = 3                                          # roll, yaw, h
 _N_BASE_P = 2 * N_STATES**2 + 2 * N_UT              # Φ, Γ, Q_d, Q_e of the paper's step
 
@@ -49,7 +48,7 @@ def _pack_n(P) -> ca.SX:
 
 def _symmetric(P) -> ca.SX:
     """P rebuilt from its upper triangle: the lower half's expressions are dropped,
-    which halves the work of every update and propagation (as in ``kalman_steps``)."""
+    which halves the work of every update and propagation (as in ``kalman.steps``)."""
     return _unpack_n(_pack_n(P), P.size1())
 
 
@@ -92,7 +91,7 @@ def measurement_rows_sym(names: tuple[str, ...], sel) -> list[ca.SX]:
 
 def gated_update(x, P, z, m, r, rows, gamma=None):
     """Sequential scalar updates of roll, yaw and h (Eqs. 36–38), each in Joseph form
-    (Eq. 37), as ``kalman_steps.sequential_update`` with rows of up to three nonzeros.
+    (Eq. 37), as ``kalman.steps.sequential_update`` with rows of up to three nonzeros.
     With ``gamma`` a present measurement with ν²/S > γ is rejected: its gain is zeroed
     by a 0/1 factor, so the Joseph form leaves P unchanged bit for bit (no branch), and
     S is the one at that point of the sequence.  Returns x, P, ν, S and the 0/1
@@ -132,7 +131,7 @@ def _sizes(names):
 @lru_cache(maxsize=8)
 def filter_step(names: tuple[str, ...], gating: bool) -> ca.Function:
     """``(s, z, m, r, u, e[, sel], p) -> (s_next, aux)`` with s = [x⁻ (n), P⁻ packed] at
-    t_k; z, m, r, u, e as in ``kalman_steps.filter_step``; sel the one-hot head of the
+    t_k; z, m, r, u, e as in ``kalman.steps.filter_step``; sel the one-hot head of the
     sample's yaw over the yaw-bias states (an input only when there are some); aux =
     [x⁺ (n), ν (3), S (3), rejected (3), P⁺ packed]: P last, so that a caller keeps
     every other column at every sample and P on chosen ones (``augmented._roll``)."""
@@ -184,7 +183,7 @@ def smoother_step(names: tuple[str, ...]) -> ca.Function:
 
 @lru_cache(maxsize=8)
 def smoother_x_step(names: tuple[str, ...]) -> ca.Function:
-    """The RTS step for the smoothed state alone (``kalman_steps.smoother_x_step``):
+    """The RTS step for the smoothed state alone (``kalman.steps.smoother_x_step``):
     x^s_k = x⁺_k + P⁺_k Φ_aᵀ P⁻¹_pred (x^s_{k+1} − x⁻_{k+1}), one right-hand side."""
     n, _, xk, pk, u, e, p, phi, Pk, x_pred, P_pred = _smoother_pieces(names)
     s = ca.SX.sym("s", n)

@@ -13,7 +13,7 @@ is the paper's point (a batch "must use at least one-third of an orbit ... the
 dynamic models are not accurate enough to propagate across this interval without
 accounting for process noise").  ``linear_batch`` minimises J for the paper's
 linear model with the closed-form Φ (one weighted least-squares solve); the
-nonlinear model's Gauss–Newton/Levenberg–Marquardt is ``batch_nonlinear``.  Both
+nonlinear model's Gauss–Newton/Levenberg–Marquardt is ``batch.nonlinear``.  Both
 share the normal-equation solve here (``solve_normal``): states without
 information from the span (no yaw measurement: the constant yaw torque, Section 4)
 are held at the a priori (``fixed``).
@@ -32,11 +32,11 @@ from functools import lru_cache
 import numpy as np
 import scipy.linalg
 
-from .kalman import Measurements, _param_rows, kalman_filter
-from .kalman_steps import MEAS_STATES, N_UT, pack_params, unpack
-from .model import N_STATES, NCZ, STATE_NAMES, ProcessNoise
-from .steps import StepTable, roll_blocks
-from .transition import Discretization
+from ..kalman.filter import Measurements, _param_rows, kalman_filter
+from ..kalman.steps import MEAS_STATES, N_UT, pack_params, unpack
+from ..linear.model import N_STATES, NCZ, STATE_NAMES, ProcessNoise
+from ..linear.steps import StepTable, roll_blocks
+from ..linear.transition import Discretization
 
 
 class BatchError(ValueError):
@@ -176,8 +176,8 @@ class LinearData:
 def _linear_engine(per_step: bool):
     from dynprop.rollout.chunks import ChunkedRollout
 
-    from .batch_steps import linear_step
-    from .steps import per_step as per_step_of
+    from ..linear.steps import per_step as per_step_of
+    from .steps import linear_step
     step = linear_step()
     return ChunkedRollout(per_step_of(step) if per_step else step, 4096, 256, None)
 

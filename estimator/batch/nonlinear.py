@@ -1,8 +1,8 @@
 """The batch least-squares fit (``batch``) with the full nonlinear gyrostat: the EKF's
-process model (``ekf_model``, ``eom``), solved by Gauss–Newton with
+process model (``ekf.model``, ``eom``), solved by Gauss–Newton with
 Levenberg–Marquardt damping.
 
-Each iteration is one compiled pass over the span (``batch_steps.nonlinear_step``):
+Each iteration is one compiled pass over the span (``batch.steps.nonlinear_step``):
 the RK4 rollout from the current x_0, the residuals, and their Jacobian from the
 forward sensitivities of that rollout, summed into the normal equations.  The step
 δ solves (N + μ diag N) δ = g; it is taken if it lowers the cost J, and μ shrinks
@@ -23,9 +23,11 @@ from functools import lru_cache
 import numpy as np
 from dynprop.rollout.chunks import ChunkedRollout
 
-from . import batch_steps as bs
-from . import ekf_model as m
-from .batch import (
+from ..ekf import model as m
+from ..linear.model import N_STATES, STATE_NAMES
+from ..linear.steps import per_step, roll_blocks, step_params, substeps
+from . import steps as bs
+from .linear import (
     BatchError,
     BatchSolution,
     Prior,
@@ -36,8 +38,6 @@ from .batch import (
     solve_normal,
     with_prior,
 )
-from .model import N_STATES, STATE_NAMES
-from .steps import per_step, roll_blocks, step_params, substeps
 
 MU_MAX = 1e8
 MU_START = 1e-4
@@ -55,7 +55,7 @@ class NonlinearData:
     """One span's data for the nonlinear model, per sample: z (N, 3: roll, yaw in rad,
     h in N m s; NaN where missing) and their variances r (N, 3), the EKF's inputs u
     (N, 5: H, Ḣ, N_w*, N_x*, N_z*), the Earth sensor's pitch and pitch rate (N, 2,
-    smoothed), the pass parameters (``batch_steps.pack_batch_params``) and, off the
+    smoothed), the pass parameters (``batch.steps.pack_batch_params``) and, off the
     grid, each sample's interval ``dt_s`` (N,)."""
 
     z: np.ndarray
@@ -160,7 +160,7 @@ def nonlinear_batch(data: NonlinearData, prior: Prior | None, x_start: np.ndarra
                     options: Options = Options()) -> BatchSolution:
     """Gauss–Newton/Levenberg–Marquardt from ``x_start`` (module doc); the solution
     propagated over the span with its covariance at ``rows``, and with
-    ``consider_sigma`` (``batch_steps.CONSIDER_NONLINEAR``'s 1σ) the consider
+    ``consider_sigma`` (``batch.steps.CONSIDER_NONLINEAR``'s 1σ) the consider
     covariance."""
     z = np.asarray(data.z, dtype=float)
     counts = measurement_counts(z)

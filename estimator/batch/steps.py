@@ -8,7 +8,7 @@ x_k = Ψ_k x_0 + d_k, with Ψ_{k+1} = Φ Ψ_k (Ψ_0 = I) and d_{k+1} = Φ d_k + 
 measurements z_k = G x_k + v (Eq. 26): Λ = Σ Ψᵀ Gᵀ R⁻¹ G Ψ, b = Σ Ψᵀ Gᵀ R⁻¹ (z − G d),
 c = Σ (z − G d)ᵀ R⁻¹ (z − G d).
 
-Nonlinear (the EKF's process model, ``ekf_model``): the state X_k (12) is rolled
+Nonlinear (the EKF's process model, ``ekf.model``): the state X_k (12) is rolled
 out by RK4, and its sensitivity Ψ_k = ∂X_k/∂(x_0, c) (12 × m) by forward-mode
 derivatives of that very step (``ca.jtimes``): the Gauss–Newton Jacobian of the
 rollout itself, not of an approximation.  x_0 is the paper's nine states at the
@@ -27,25 +27,18 @@ import casadi as ca
 import numpy as np
 from dynprop.eom.gyrostat import dcm_from_quat, euler312, euler312_rates
 
-from . import ekf_model as m
-from .ekf import _pack_sym as _pack_sym_iu
-from .ekf import _unpack_sym as _unpack_sym_iu
-from .kalman_steps import (
-    _IU,
-    MEAS_STATES,
-    N_UT,
-    PHI_PATTERN,
-    _pack_sym,
-    _sparse_sym,
-)
-from .model import N_STATES
+from ..ekf import model as m
+from ..ekf.filter import _pack_sym as _pack_sym_iu
+from ..ekf.filter import _unpack_sym as _unpack_sym_iu
+from ..kalman.steps import _IU, MEAS_STATES, N_UT, PHI_PATTERN, _pack_sym, _sparse_sym
+from ..linear.model import N_STATES
 
 # Consider parameters of the nonlinear model: the inertia's six entries (kg m²),
 # then the wheels' cant (rad), which scales the tachometers' H, Ḣ (cos) and h, N_w*
 # (sin).
 CONSIDER_NONLINEAR = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz", "cant")
 N_C = len(CONSIDER_NONLINEAR)
-# Batch parameters: the EKF's (``ekf_model.pack_params``), then tan and cot of the
+# Batch parameters: the EKF's (``ekf.model.pack_params``), then tan and cot of the
 # nominal cant (the consider cant's first-order scale factors).
 N_PB = m.N_PARAMS + 2
 
@@ -61,9 +54,9 @@ def _psi_sym(flat) -> ca.SX:
 @lru_cache(maxsize=2)
 def linear_step() -> ca.Function:
     """``(s, z, mask, r, u, p) -> (s_next, aux)`` with s = [Ψ (81, column-major), d (9),
-    Λ (45, ``kalman_steps.pack``), b (9), c (1)], z, mask, r the roll, yaw, h
+    Λ (45, ``kalman.steps.pack``), b (9), c (1)], z, mask, r the roll, yaw, h
     measurements as the filter takes them, u = ū_k (Eq. 12a) and p the filter's
-    parameter vector (``kalman_steps.pack_params``: Φ, Γ, Q_d, unused here);
+    parameter vector (``kalman.steps.pack_params``: Φ, Γ, Q_d, unused here);
     aux = d at the sample (G d, the zero-state prediction of roll, yaw, h)."""
     n2 = N_STATES**2
     s = ca.SX.sym("s", n2 + N_STATES + N_UT + N_STATES + 1)
@@ -151,7 +144,7 @@ def _wrap(a):
 
 
 def model_step(X, u, pitch_next, p, c):
-    """One RK4 step (``ekf_model.rk4``) with the consider parameters applied, then
+    """One RK4 step (``ekf.model.rk4``) with the consider parameters applied, then
     pitch slaved to the Earth sensor's at the step's end."""
     pm, ue, _ = _with_consider(p, u, c)
     Xn = m.rk4(X, ue, pm)

@@ -1,4 +1,4 @@
-"""The extended Kalman filter on the full nonlinear model (``ekf_model``), beside the
+"""The extended Kalman filter on the full nonlinear model (``ekf.model``), beside the
 paper's linear one (``kalman``): the same telemetry, the same compiled
 rollout, results in the paper's coordinates so every comparison applies to both.
 
@@ -6,7 +6,7 @@ Each step, at t_k: sequential scalar updates of roll, pitch, yaw and h, all
 linearised at the prior (so the order does not matter: the batch update, one
 scalar at a time), in Joseph form, the angle innovations wrapped to ±π; the
 correction is then applied to the nominal state (the quaternion multiplicatively,
-``ekf_model.inject``).  Then RK4 propagation of the nominal state over Δt with the
+``ekf.model.inject``).  Then RK4 propagation of the nominal state over Δt with the
 inputs held, and P⁻ = Φ P⁺ Φᵀ + Q_d with Φ the error-state Jacobian of that very
 RK4 step and Q_d = ½(Φ G Q Gᵀ Φᵀ + G Q Gᵀ) Δt (trapezoid: Δt = 0.512 s is 1/340 of
 the nutation period).  The error state is reset to zero after each update; the
@@ -22,9 +22,9 @@ import casadi as ca
 import numpy as np
 from dynprop.rollout.chunks import ChunkedRollout
 
-from . import ekf_model as m
-from .kalman import N_UT, FilterResult
-from .steps import per_step, roll_blocks, step_params, substeps
+from ..kalman.filter import N_UT, FilterResult
+from ..linear.steps import per_step, roll_blocks, step_params, substeps
+from . import model as m
 
 _IU = np.triu_indices(m.NE)
 N_UT_E = len(_IU[0])   # 66
@@ -66,7 +66,7 @@ ITERATIONS = 2   # of the measurement update: 10° → ~1° → ~0.01°, the noi
 @lru_cache(maxsize=4)
 def ekf_step(iterations: int = ITERATIONS) -> ca.Function:
     """``(s, z, mask, r, u, p) -> (s_next, aux)`` with s = [X̂⁻ (12), P⁻ (66)], p =
-    [model parameters (``ekf_model.pack_params``), ω_n]; aux = [x (9) and P (45) in
+    [model parameters (``ekf.model.pack_params``), ω_n]; aux = [x (9) and P (45) in
     the paper's coordinates, ν (4), S (4), X̂⁺ (12)] after the update."""
     s = ca.SX.sym("s", m.NX + N_UT_E)
     z, mask, r = ca.SX.sym("z", m.NZ), ca.SX.sym("m", m.NZ), ca.SX.sym("r", m.NZ)
@@ -166,7 +166,7 @@ def ekf_filter(inputs: EkfInputs, params: np.ndarray, omega_n_radps: float,
                chunk: int = 4096, rows=None, keep_nominal: bool = False,
                iterations: int = ITERATIONS, dt_s: np.ndarray | None = None) -> EkfResult:
     """Run the EKF over every sample (``rows``: keep only those samples' history).
-    ``params`` from ``ekf_model.pack_params``; with ``dt_s`` (the interval after each
+    ``params`` from ``ekf.model.pack_params``; with ``dt_s`` (the interval after each
     sample, ``steps.step_intervals``) each step propagates over its own Δt instead of
     the one in ``params`` (``_ekf_per_step``)."""
     z, r, u = (np.asarray(a, dtype=float) for a in (inputs.z, inputs.r, inputs.u))

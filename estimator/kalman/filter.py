@@ -9,7 +9,7 @@ Joseph form (I − KG) P (I − KG)ᵀ + K R Kᵀ keeps P symmetric and positive
 definite in floating point, where the short form (I − KG) P does not; with
 scalar updates and G a unit row it costs little.
 
-The step is one CasADi function (``kalman_steps``) rolled out by ``rollout``
+The step is one CasADi function (``kalman.steps``) rolled out by ``rollout``
 (compiled once, Φ, Γ and Q_d entering as parameters), so a day of 0.512 s data
 takes a fraction of a second; ``dense_filter`` is a plain-numpy reference used by
 the tests.
@@ -21,18 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kalman_steps import (
-    _IU,
-    MEAS_STATES,
-    N_UT,
-    PHI_PATTERN,
-    _engine,
-    pack,
-    pack_params,
-    unpack,
-)
-from .model import N_STATES
-from .steps import StepTable, roll_blocks
+from ..linear.model import N_STATES
+from ..linear.steps import StepTable, roll_blocks
+from .steps import _IU, MEAS_STATES, N_UT, PHI_PATTERN, _engine, pack, pack_params, unpack
 
 
 @dataclass(frozen=True)

@@ -22,12 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .covariance import SensorSpecs, roll_variance, tach_variance, yaw_variance
-from .kalman import Measurements
-from .model import ModelParams, input_vector
+from ..linear.model import ModelParams, input_vector
+from ..linear.noise import PAPER_SENSORS, SensorSpecs, roll_variance, tach_variance, yaw_variance
+from .filter import Measurements
 from .savgol import savgol_derivative
-
-PAPER_SENSORS = SensorSpecs()  # Sections 2.1 and 2.3
 
 
 def yaw_momentum(wheel_speeds_radps: np.ndarray, yaw_factors: np.ndarray) -> np.ndarray:
@@ -246,7 +244,7 @@ def prepare_at_times(params: ModelParams, t_s, roll_rad, yaw_rad, wheel_speeds_r
 def earth_pitch(pitch_rad, dt_s: float, window_s: float = 20.0) -> np.ndarray:
     """The Earth sensor's pitch and pitch rate (N, 2), smoothed by the quadratic
     Savitzky–Golay fit ``wheel_torque`` uses: the nonlinear batch's pitch, which it
-    takes from the sensor rather than propagating (``batch_steps``).  Missing samples
+    takes from the sensor rather than propagating (``batch.steps``).  Missing samples
     are bridged by a straight line."""
     p = np.asarray(pitch_rad, dtype=float)
     ok = np.isfinite(p)

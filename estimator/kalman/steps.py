@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 from dynprop.rollout.chunks import ChunkedRollout
 
-from .model import H_WHEEL, N_STATES, R, Y
+from ..linear.model import H_WHEEL, N_STATES, R, Y
 
 MEAS_STATES = (R, Y, H_WHEEL)   # roll, yaw, h: each a unit row of G (Eq. 26)
 MEAS_NAMES = ("roll", "yaw", "h")
@@ -93,7 +93,7 @@ def pack_params(disc, Qd_unit=None) -> np.ndarray:
 def sequential_update(x, P, z, m, r, trace: list | None = None):
     """The scalar updates of roll, yaw and h in turn (Eqs. 36–38), each in Joseph form
     (Eq. 37); returns the updated x, P and each measurement's innovation ν and its
-    variance S.  Shared by the filter's step and the likelihood's (``likelihood_steps``),
+    variance S.  Shared by the filter's step and the likelihood's (``tuning.steps``),
     which takes each update's P before it and gain K from ``trace``."""
     eye = ca.SX.eye(N_STATES)
     nus, ss = [], []
@@ -219,6 +219,6 @@ def _engine(kind: str, chunk: int, backend: str | None) -> ChunkedRollout:
     step = {"filter": filter_step, "smoother": smoother_step,
             "smoother_x": smoother_x_step}[base]()
     if base != kind:   # each step's own Φ, Γ, Q_d (``steps``: telemetry at any cadence)
-        from .steps import per_step
+        from ..linear.steps import per_step
         step = per_step(step)
     return ChunkedRollout(step, chunk, 256, backend)

@@ -1,5 +1,5 @@
 """The paper filter's likelihood of its own telemetry, and its derivatives in the
-noise parameters: what noise tuning (``estimator.tune``) maximises.
+noise parameters: what noise tuning (``estimator.tuning.maximum``) maximises.
 
 Prediction-error decomposition (Schweppe 1965): the filter (``kalman``) updates
 with roll, yaw and h in turn, and each present scalar measurement has an
@@ -22,7 +22,7 @@ expected (Fisher) information of the innovations (Gupta & Mehra 1974, IEEE TAC
     I_jk = Σ ½ ∂_j S ∂_k S / S² + ∂_j ν ∂_k ν / S,
 
 so one pass gives ln L, its gradient and a Newton-type curvature.  The compiled
-steps are in ``likelihood_steps``.
+steps are in ``tuning.steps``.
 """
 
 from __future__ import annotations
@@ -33,18 +33,11 @@ from functools import lru_cache
 import numpy as np
 from dynprop.rollout.chunks import ChunkedRollout
 
-from .kalman import Measurements, _inputs
-from .kalman_steps import MEAS_STATES, N_UT, pack
-from .likelihood_steps import (
-    N_ACC,
-    N_BASE,
-    likelihood_step,
-    n_fisher,
-    score_step,
-    score_step_ad,
-)
-from .model import N_STATES, ModelParams, ProcessNoise
-from .transition import process_noise_integral
+from ..kalman.filter import Measurements, _inputs
+from ..kalman.steps import MEAS_STATES, N_UT, pack
+from ..linear.model import N_STATES, ModelParams, ProcessNoise
+from ..linear.transition import process_noise_integral
+from .steps import N_ACC, N_BASE, likelihood_step, n_fisher, score_step, score_step_ad
 
 LOG_2PI = float(np.log(2 * np.pi))
 NOISE_KEYS = ("q_x", "q_z", "q_w", "q_px", "q_pz", "q_cx", "q_cz")

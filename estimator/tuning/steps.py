@@ -11,7 +11,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from .kalman_steps import (
+from ..kalman.steps import (
     MEAS_STATES,
     N_UT,
     _pack_sym,
@@ -21,7 +21,7 @@ from .kalman_steps import (
     propagation,
     sequential_update,
 )
-from .model import N_STATES
+from ..linear.model import N_STATES
 
 N_BASE = N_STATES + N_UT          # x and packed P
 N_ACC = 6                         # Σ ln S and Σ ν²/S per measurement kind
@@ -85,7 +85,7 @@ def _accumulated(acc, m, nus, ss):
 @lru_cache(maxsize=4)
 def likelihood_step(n_q: int, roll: bool) -> ca.Function:
     """``(s, z, m, r, u, e, p) -> (s_next, aux)``: the filter's step (the same
-    expressions as ``kalman_steps.filter_step``) with s = [x⁻, P⁻ (45), Σ m ln S (3),
+    expressions as ``kalman.steps.filter_step``) with s = [x⁻, P⁻ (45), Σ m ln S (3),
     Σ m ν²/S (3)] and aux = [ν (3), S (3)]; e is the step's raw bridge noise."""
     (s0, z, m, r, u, e, p, _), base_next, nus, ss = _step_expressions(n_q, roll)
     acc = ca.SX.sym("acc", N_ACC)

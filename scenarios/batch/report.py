@@ -9,10 +9,10 @@ import json
 from pathlib import Path
 
 import numpy as np
-from dynprop.estimator.batch import BatchError
-from dynprop.estimator.model import N_STATES
-from dynprop.estimator.steps import StepTable
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.batch.linear import BatchError
+from dynprop.estimator.linear.model import N_STATES
+from dynprop.estimator.linear.steps import StepTable
+from dynprop.estimator.linear.transition import discretize
 
 from ..bridge.coordinates import model_truth, truth_torques
 from ..bridge.inputs import telemetry_inputs

@@ -1,5 +1,5 @@
 """Chained batches over a telemetry record: the spans, each batch's a priori, the
-solve (``estimator.batch``, ``estimator.batch_nonlinear``), and the solutions joined
+solve (``estimator.batch``, ``estimator.batch.nonlinear``), and the solutions joined
 into one history.
 
 Span j fits the samples with t in [t_0 + j (L − O), t_0 + j (L − O) + L), L the span
@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator.batch import (
+from dynprop.estimator.batch.linear import (
     BatchError,
     BatchSolution,
     LinearData,
@@ -27,10 +27,10 @@ from dynprop.estimator.batch import (
     linear_batch,
     linear_start,
 )
-from dynprop.estimator.batch_nonlinear import NonlinearData, Options, nonlinear_batch
-from dynprop.estimator.kalman import Measurements
-from dynprop.estimator.model import N_STATES
-from dynprop.estimator.steps import StepTable
+from dynprop.estimator.batch.nonlinear import NonlinearData, Options, nonlinear_batch
+from dynprop.estimator.kalman.filter import Measurements
+from dynprop.estimator.linear.model import N_STATES
+from dynprop.estimator.linear.steps import StepTable
 
 from ..bridge.batch import linear_consider, linear_data, nonlinear_consider, nonlinear_data
 from ..bridge.inputs import initial_prior

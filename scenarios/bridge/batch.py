@@ -1,4 +1,4 @@
-"""Telemetry to the batch estimator's data (``estimator.batch``, ``batch_nonlinear``):
+"""Telemetry to the batch estimator's data (``estimator.batch``, ``batch.nonlinear``):
 the paper filter's measurements and inputs (``inputs.filter_inputs``: the same yaw
 variances with the DSS correlation inflation, the same N_w* = ḣ), the EKF's inputs
 for the nonlinear model (``ekf.ekf_inputs``), the Earth sensor's smoothed pitch, and
@@ -8,12 +8,12 @@ model's central differences)."""
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator import batch_steps as bs
-from dynprop.estimator.batch import ConsiderCase, LinearData
-from dynprop.estimator.batch_nonlinear import NonlinearData
-from dynprop.estimator.preprocess import cadence, earth_pitch
-from dynprop.estimator.steps import StepTable, step_intervals
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.batch import steps as bs
+from dynprop.estimator.batch.linear import ConsiderCase, LinearData
+from dynprop.estimator.batch.nonlinear import NonlinearData
+from dynprop.estimator.kalman.preprocess import cadence, earth_pitch
+from dynprop.estimator.linear.steps import StepTable, step_intervals
+from dynprop.estimator.linear.transition import discretize
 
 from ..config import build
 from ..config.loader import validate
@@ -61,7 +61,7 @@ def consider_sigma(s: Scenario) -> dict[str, float]:
 
 
 def nonlinear_consider(s: Scenario) -> np.ndarray:
-    """The nonlinear model's consider 1σ in ``batch_steps.CONSIDER_NONLINEAR`` order.
+    """The nonlinear model's consider 1σ in ``batch.steps.CONSIDER_NONLINEAR`` order.
     (Its pitch momentum H comes from the tachometers, so the nominal wheel speed is
     not one of them.)"""
     sig = consider_sigma(s)

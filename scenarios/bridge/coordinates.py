@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator import model as em
+from dynprop.estimator.linear import model as em
 from dynprop.sim.frames import euler312_rates
 from dynprop.sim.history import EXTERNAL_TORQUES
 

@@ -6,7 +6,7 @@ assumes the yaw measurement a run of the same scenario uses."""
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator.covariance_report import covariance_report
+from dynprop.estimator.analysis.covariance_report import covariance_report
 
 from ..config import build
 from ..config.schema import Scenario

@@ -10,10 +10,10 @@ and its rate Ḣ.
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator import ekf_model as m
-from dynprop.estimator import model as em
-from dynprop.estimator.ekf import EkfInputs, initial_state
-from dynprop.estimator.preprocess import wheel_torque, wheel_torque_at, yaw_momentum
+from dynprop.estimator.ekf import model as m
+from dynprop.estimator.ekf.filter import EkfInputs, initial_state
+from dynprop.estimator.kalman.preprocess import wheel_torque, wheel_torque_at, yaw_momentum
+from dynprop.estimator.linear import model as em
 
 from ..config import build
 from ..config.schema import Scenario

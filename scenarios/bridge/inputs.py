@@ -12,15 +12,15 @@ equals the whole run's; every filter pads through that one routine.
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator import model as em
-from dynprop.estimator.kalman import ExtraNoise
-from dynprop.estimator.preprocess import (
+from dynprop.estimator.kalman.filter import ExtraNoise
+from dynprop.estimator.kalman.preprocess import (
     cadence,
     prepare,
     prepare_at_times,
     quantisation_inflation,
 )
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.linear import model as em
+from dynprop.estimator.linear.transition import discretize
 from dynprop.sim.telemetry import Telemetry
 
 from ..config import build
@@ -74,7 +74,7 @@ def prepared_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_
     (``estimator.preprocess.FilterInputs``, with a dropout's measured wheel noise).
     ``known_Nm`` (N, 2), roll and yaw torques known per sample, joins the modelled
     N_x*, N_z* (Eq. 9).  ``t_s``: the samples' own times, for telemetry off the
-    scenario's grid (``estimator.steps``); None on the grid."""
+    scenario's grid (``estimator.linear.steps``); None on the grid."""
     e = s.estimator
     if yaw_sigma is not None and sun_head is not None:
         dt = None if t_s is None else cadence(t_s)

@@ -20,9 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator.covariance import roll_variance
-from dynprop.estimator.pitch import PitchNoise
-from dynprop.estimator.preprocess import wheel_torque, wheel_torque_at, yaw_momentum
+from dynprop.estimator.kalman.preprocess import wheel_torque, wheel_torque_at, yaw_momentum
+from dynprop.estimator.linear.noise import roll_variance
+from dynprop.estimator.pitch.model import PitchNoise
 
 from ..config import build
 from ..config.schema import Scenario

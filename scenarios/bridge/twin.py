@@ -14,9 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator import model as em
-from dynprop.estimator.propagate import propagate_lti, propagate_lti_final
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.linear import model as em
+from dynprop.estimator.linear.propagate import propagate_lti, propagate_lti_final
+from dynprop.estimator.linear.transition import discretize
 from dynprop.sim.frames import rotate_312
 from dynprop.sim.telemetry import Telemetry, make_telemetry
 
@@ -102,7 +102,7 @@ def twin_window(s: Scenario, params, disc, truth, tt: TruthTorques, h_next, x_pr
     """The twin over one window of a streamed run, ``linear_twin`` with its state and
     generators carried from the previous window (``x_prev``, None for the first).
     Its torque states are set to the new window's fit at its first sample, so that
-    its total torque stays the truth's (``run.stream``'s module doc says why).
+    its total torque stays the truth's (``run.stream.windows``'s module doc says why).
     Returns its states, its telemetry and the state where the next window starts."""
     u = twin_input(params, s.estimator.model_torques, tt, truth.h_Nms, s.sample_interval_s,
                    h_next)

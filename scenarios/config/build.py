@@ -7,7 +7,7 @@ from __future__ import annotations
 from datetime import datetime
 
 import numpy as np
-from dynprop.estimator.model import ModelParams, ProcessNoise
+from dynprop.estimator.linear.model import ModelParams, ProcessNoise
 from dynprop.sim import control, disturbance, environment, ephemeris, sensors, spacecraft
 from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.truth import InitialState, TruthStream
@@ -145,7 +145,7 @@ def estimator_model(s: Scenario) -> tuple[ModelParams, ProcessNoise]:
 def estimator_sensor_specs(s: Scenario):
     """The sensor numbers the covariance analysis uses (Section 6), from the scenario;
     the yaw variance is the DSS's, the sensor that sees the Sun last before the gap."""
-    from dynprop.estimator.covariance import SensorSpecs
+    from dynprop.estimator.linear.noise import SensorSpecs
     c, w = s.sensors, s.spacecraft.wheels
     return SensorSpecs(dt_s=s.sample_interval_s, tach_quantum_rpm=c.tachometer.quantum_rpm,
                        tach_noise_3sigma_rpm=c.tachometer.noise_3sigma_rpm,
@@ -179,7 +179,7 @@ def bias_model(s: Scenario):
     the schema's order) as an ``estimator.augmented.BiasModel``: prior 1σ in rad and
     random-walk density q = (walk_deg_per_sqrt_h · π/180)² / 3600 rad²/s (a 1σ growth of
     walk degrees over an hour); None when every bias is off (the paper's filter)."""
-    from dynprop.estimator.augmented import BiasModel
+    from dynprop.estimator.augmented.filter import BiasModel
     states = s.estimator.bias_states
     on = [(name, getattr(states, name)) for name in states.on()]
     if not on:

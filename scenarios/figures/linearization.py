@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds
-from dynprop.estimator.model import N_STATES
+from dynprop.estimator.kalman.consistency import chi2_bounds
+from dynprop.estimator.linear.model import N_STATES
 
 
 def _sweep_values(report, model: str, key: str, kind: str) -> list[float]:

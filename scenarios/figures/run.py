@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from dynprop.estimator import model as em
-from dynprop.estimator.consistency import chi2_bounds
+from dynprop.estimator.kalman.consistency import chi2_bounds
+from dynprop.estimator.linear import model as em
 from dynprop.plots.consistency import plot_consistency
 from dynprop.plots.errors import plot_errors, plot_estimates
 from dynprop.plots.run_figures import TORQUE_NAMES, plot_torques
@@ -34,7 +34,7 @@ from ..files.rundir import RunDirError
 from ..workers import worker_pool
 from . import save_figure
 
-# Columns of the comparison arrays: the model's state indices (estimator.model).
+# Columns of the comparison arrays: the model's state indices (estimator.linear.model).
 COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
            "N_cx": em.NCX, "N_cz": em.NCZ}
 UNITS = {"roll": "deg", "yaw": "deg", "h": "N m s"}

@@ -4,7 +4,7 @@ The figures (``figures.run``) read nothing else besides scenario.yaml, so
 ``dynprop plot`` redraws exactly what ``run`` (or ``estimate``) drew, and which
 figures exist follows from which keys are here (``figures.run.figure_set``).
 
-Keys (time first, N samples; state columns in ``estimator.model`` order, in
+Keys (time first, N samples; state columns in ``estimator.linear.model`` order, in
 display units: deg, deg/s, N m s, N m; written only when their inputs exist):
 
 - always: ``t_s`` (s, float64), ``yaw_present`` (1 where a Sun-sensor yaw is
@@ -32,8 +32,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from dynprop.estimator.consistency import nis
-from dynprop.estimator.model import H_WHEEL, R, Y
+from dynprop.estimator.kalman.consistency import nis
+from dynprop.estimator.linear.model import H_WHEEL, R, Y
 
 from ..units import RAD2DEG
 from .columns import PITCH_FACTORS, display_factors

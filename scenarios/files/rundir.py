@@ -221,11 +221,11 @@ def clean_stale(parent: Path) -> list[str]:
 
 
 SHM_ROOT = Path("/dev/shm")
-HANDOFF_PREFIX = "dynprop-"   # scenarios.run.handoff's directories: dynprop-<pid>-<random>
+HANDOFF_PREFIX = "dynprop-"   # scenarios.run.stream.handoff's directories: dynprop-<pid>-<random>
 
 
 def clean_stale_handoffs(root: Path = SHM_ROOT) -> list[Path]:
-    """Remove the record handoff directories (``scenarios.run.handoff``) under ``root``
+    """Remove the record handoff directories (``scenarios.run.stream.handoff``) under ``root``
     whose run is gone: a killed `dynprop run` leaves its records in memory there."""
     removed = []
     for path in root.glob(f"{HANDOFF_PREFIX}*-*"):

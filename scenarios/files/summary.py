@@ -10,9 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds
-from dynprop.estimator.covariance import approx_yaw_variance
-from dynprop.estimator.model import N_STATES
+from dynprop.estimator.analysis.covariance import approx_yaw_variance
+from dynprop.estimator.kalman.consistency import chi2_bounds
+from dynprop.estimator.linear.model import N_STATES
 
 from .. import __version__
 from ..config.schema import Scenario

@@ -7,7 +7,7 @@ filter propagates across it and its covariance grows, and a cadence that is a
 multiple of the step (1.024 s, 2.048 s) is every other sample missing.  Rows off
 that grid (a 1.0 s cadence, jittered tags) are samples at their own times, and the
 filter propagates over each interval with the closed forms at that interval
-(``estimator.steps``).  A gap of any length is accepted; one longer than
+(``estimator.linear.steps``).  A gap of any length is accepted; one longer than
 ``estimator.max_gap_s`` is a warning in summary.json.
 """
 
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from dynprop.estimator.steps import step_intervals
+from dynprop.estimator.linear.steps import step_intervals
 
 from ..config import build
 from ..config.schema import Scenario
@@ -201,7 +201,7 @@ def on_grid(cols: dict[str, np.ndarray], dt_s: float, max_gap_s: float,
     (NaN): with every sample present the columns are the file's own, bit for bit, and
     the filter runs exactly as on `run`'s telemetry.  Otherwise (another cadence,
     jittered tags) each row is a sample at its own time and the filter propagates
-    over each interval with that interval's Φ, Γ, Q_d (``estimator.steps``).  Roll,
+    over each interval with that interval's Φ, Γ, Q_d (``estimator.linear.steps``).  Roll,
     yaw and wheel values that are empty in a row are missing at that sample only.  A
     gap longer than ``max_gap_s`` is accepted (the covariance grows across it) and
     reported (``GriddedTelemetry.stats``, and a warning in summary.json)."""

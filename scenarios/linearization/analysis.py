@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from dynprop.eom.linear import eq5_inertia
-from dynprop.estimator.consistency import chi2_bounds, fraction_inside, nees
-from dynprop.estimator.kalman import unpack
-from dynprop.estimator.model import N_STATES, R, Y
+from dynprop.estimator.kalman.consistency import chi2_bounds, fraction_inside, nees
+from dynprop.estimator.kalman.filter import unpack
+from dynprop.estimator.linear.model import N_STATES, R, Y
 
 from ..config import build
 from ..config.schema import Scenario

@@ -39,7 +39,7 @@ from dynprop.eom.linear import (
     jacobian_of,
     model_matrices,
 )
-from dynprop.estimator.model import roll_yaw_blocks, torque_input_matrix
+from dynprop.estimator.linear.model import roll_yaw_blocks, torque_input_matrix
 from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.linearize import linearize_about_nominal
 from dynprop.sim.spacecraft import Spacecraft

@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 from dynprop.eom.linear import model_matrices
-from dynprop.estimator import model as em
-from dynprop.estimator.propagate import propagate_lti, zoh
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.linear import model as em
+from dynprop.estimator.linear.propagate import propagate_lti, zoh
+from dynprop.estimator.linear.transition import discretize
 from dynprop.sim.frames import euler312_rates
 from dynprop.sim.linearize import linearize_about_nominal
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dynprop.estimator.consistency import chi2_bounds
-from dynprop.estimator.model import N_STATES
+from dynprop.estimator.kalman.consistency import chi2_bounds
+from dynprop.estimator.linear.model import N_STATES
 
 from .. import __version__
 from ..config import build

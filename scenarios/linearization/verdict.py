@@ -9,8 +9,8 @@ row can exceed the total in magnitude, or have the other sign, when other effect
 
 from __future__ import annotations
 
-from dynprop.estimator.consistency import chi2_bounds
-from dynprop.estimator.model import N_STATES
+from dynprop.estimator.kalman.consistency import chi2_bounds
+from dynprop.estimator.linear.model import N_STATES
 
 from .analysis import KINDS
 from .propagation import SWEEP_DEG

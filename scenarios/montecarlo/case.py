@@ -14,11 +14,11 @@ import time
 import traceback
 
 import numpy as np
-from dynprop.estimator.augmented import unpack as aug_unpack
-from dynprop.estimator.consistency import nees
-from dynprop.estimator.kalman import unpack
-from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
-from dynprop.estimator.pitch import unpack as pitch_unpack
+from dynprop.estimator.augmented.filter import unpack as aug_unpack
+from dynprop.estimator.kalman.consistency import nees
+from dynprop.estimator.kalman.filter import unpack
+from dynprop.estimator.linear.model import H_WHEEL, N_STATES, R, Y
+from dynprop.estimator.pitch.filter import unpack as pitch_unpack
 
 from ..config import build
 from ..config.schema import Scenario

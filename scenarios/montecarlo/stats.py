@@ -18,8 +18,8 @@ Statistics*, 3rd ed., Section 7.1), which is open above until N ≥ ln(0.025)/ln
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds
-from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
+from dynprop.estimator.kalman.consistency import chi2_bounds
+from dynprop.estimator.linear.model import H_WHEEL, N_STATES, R, Y
 from scipy import stats as sps
 
 from .. import __version__

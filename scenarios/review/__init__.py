@@ -7,7 +7,7 @@ written; ``traces``: Plotly figure specifications from arrays (long series reduc
 to their extremes per bin); ``cells``: the numbers shown, each tied to the file and
 key it comes from; ``verdict``: the gap-end yaw against the filter, the paper and
 the requirement; ``run_page``: the page of a `run` or `estimate` directory;
-``run_figures``: its figures; ``pages``: the pages of the other commands'
+``run_figures``: its figures; ``pages/``: the pages of the other commands'
 directories; ``render``: the Jinja2 template and the atomic write.
 
 May import: ``config``, ``files``, the base modules, the estimator's published

@@ -20,8 +20,10 @@ def _builder(kind: str):
     if kind == "run":
         from .run_page import build
         return build
-    from . import pages
-    return pages.BUILDERS[kind]
+    from .pages import batch, ensemble, linearization, simulate, trim, tune
+    return {"montecarlo": ensemble.build, "linearization": linearization.build,
+            "trim": trim.build, "tune": tune.build, "batch": batch.build,
+            "simulate": simulate.build}[kind]
 
 
 def check_requirement(value: float | None) -> float | None:

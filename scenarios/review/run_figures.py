@@ -12,11 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator import model as em
+from dynprop.estimator.linear import model as em
 
 from . import traces as tr
 
-# comparison.npz's columns: the model's state indices (estimator.model), as
+# comparison.npz's columns: the model's state indices (estimator.linear.model), as
 # figures.run's COLUMNS.
 STATE = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
          "N_cx": em.NCX, "N_cz": em.NCZ}

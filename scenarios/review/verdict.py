@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 
-from dynprop.estimator.covariance import PAPER_SIGMA_YAW_DEG
+from dynprop.estimator.analysis.covariance import PAPER_SIGMA_YAW_DEG
 
 from .cells import Cell, Verdict, cell, text
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 from datetime import timedelta
 
 import numpy as np
-from dynprop.estimator.model import H_WHEEL, R, Y
+from dynprop.estimator.linear.model import H_WHEEL, R, Y
 
 from ..records import Window
 from ..units import DAY_S, RAD2DEG

@@ -4,9 +4,9 @@ design and inputs are ``bridge.ekf``'s."""
 
 from __future__ import annotations
 
-from dynprop.estimator import model as em
-from dynprop.estimator.ekf import EkfResult, ekf_filter
-from dynprop.estimator.steps import step_intervals
+from dynprop.estimator.ekf.filter import EkfResult, ekf_filter
+from dynprop.estimator.linear import model as em
+from dynprop.estimator.linear.steps import step_intervals
 
 from ..bridge.ekf import ekf_design, ekf_inputs, padded_ekf_inputs
 from ..bridge.inputs import telemetry_inputs

@@ -7,11 +7,11 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-from dynprop.estimator import model as em
-from dynprop.estimator.consistency import nees
-from dynprop.estimator.pitch import unpack as pitch_unpack
-from dynprop.estimator.steps import StepTable
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.kalman.consistency import nees
+from dynprop.estimator.linear import model as em
+from dynprop.estimator.linear.steps import StepTable
+from dynprop.estimator.linear.transition import discretize
+from dynprop.estimator.pitch.filter import unpack as pitch_unpack
 
 from ..bridge.coordinates import model_truth, pitch_truth, truth_torques
 from ..bridge.inputs import telemetry_inputs
@@ -125,7 +125,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     params, noise = build.estimator_model(s)
     t = grid.columns["t_s"]
     n = len(t)
-    # Off the grid, each step propagates over its own interval (``estimator.steps``).
+    # Off the grid, each step propagates over its own interval (``estimator.linear.steps``).
     disc = (discretize(params, noise, s.sample_interval_s) if grid.regular
             else StepTable(params, noise, grid.steps))
     measured = telemetry_inputs(s, grid.columns)

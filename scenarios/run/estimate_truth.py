@@ -25,9 +25,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds, fraction_inside, nees
-from dynprop.estimator.kalman import unpack
-from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
+from dynprop.estimator.kalman.consistency import chi2_bounds, fraction_inside, nees
+from dynprop.estimator.kalman.filter import unpack
+from dynprop.estimator.linear.model import H_WHEEL, N_STATES, R, Y
 
 from ..files.comparison import ComparisonInputs
 from ..files.summary import RunStatistics

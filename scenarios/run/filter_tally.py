@@ -6,9 +6,9 @@ telemetry); the errors are against the same truth in the paper's coordinates."""
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds, nees, nis
-from dynprop.estimator.kalman import unpack
-from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
+from dynprop.estimator.kalman.consistency import chi2_bounds, nees, nis
+from dynprop.estimator.kalman.filter import unpack
+from dynprop.estimator.linear.model import H_WHEEL, N_STATES, R, Y
 
 from ..records import FilterHistory
 from ..samples import nees_rows

@@ -16,19 +16,19 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from dynprop.estimator.augmented import (
+from dynprop.estimator.augmented.filter import (
     AugmentedResult,
     BiasModel,
     augmented_filter,
     augmented_smoother,
 )
-from dynprop.estimator.kalman import (
+from dynprop.estimator.kalman.filter import (
     FilterResult,
     SmootherResult,
     kalman_filter,
     rts_smoother,
 )
-from dynprop.estimator.model import N_STATES
+from dynprop.estimator.linear.model import N_STATES
 
 from ..config import build
 from ..config.schema import Scenario

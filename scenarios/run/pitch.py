@@ -12,8 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds, nees
-from dynprop.estimator.pitch import PitchResult, pitch_filter, steady_state, unpack
+from dynprop.estimator.kalman.consistency import chi2_bounds, nees
+from dynprop.estimator.pitch.filter import PitchResult, pitch_filter, unpack
+from dynprop.estimator.pitch.model import steady_state
 
 from ..bridge.pitch import padded_pitch_wheel_rate, pitch_design, pitch_wheel_rate
 from ..config.schema import Scenario

@@ -5,9 +5,9 @@ accumulates window by window, computed by the same numpy operations."""
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds, fraction_inside, nees, nis
-from dynprop.estimator.kalman import unpack
-from dynprop.estimator.model import N_STATES, R, Y
+from dynprop.estimator.kalman.consistency import chi2_bounds, fraction_inside, nees, nis
+from dynprop.estimator.kalman.filter import unpack
+from dynprop.estimator.linear.model import N_STATES, R, Y
 
 from ..config.schema import Scenario
 from ..files.summary import RunStatistics

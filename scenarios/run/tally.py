@@ -14,8 +14,8 @@ beside the paper's.
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds, nis
-from dynprop.estimator.model import H_WHEEL, N_STATES, R, Y
+from dynprop.estimator.kalman.consistency import chi2_bounds, nis
+from dynprop.estimator.linear.model import H_WHEEL, N_STATES, R, Y
 
 from ..files.summary import RunStatistics
 from ..records import Window

@@ -11,9 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator import model as em
-from dynprop.estimator.kalman import FilterResult, SmootherResult
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.kalman.filter import FilterResult, SmootherResult
+from dynprop.estimator.linear import model as em
+from dynprop.estimator.linear.transition import discretize
 
 from ..bridge.coordinates import model_truth, pitch_truth, truth_torques
 from ..bridge.inputs import filter_inputs, initial_prior, telemetry_inputs

@@ -19,8 +19,8 @@ import sys
 from multiprocessing import get_context
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds, nees
-from dynprop.estimator.kalman import unpack
+from dynprop.estimator.kalman.consistency import chi2_bounds, nees
+from dynprop.estimator.kalman.filter import unpack
 
 from ..config import build
 from ..config.loader import load_scenario

@@ -5,7 +5,7 @@ The batch [from, to] of a run's telemetry goes through the paper's filter once
 more, tuned for a spacecraft near trim (``config.estimation.Trim``) and with the known
 magnetic torques as modelled torques (Eq. 9).  Its torque states at the batch
 end give κ̂ ± σ by generalised least squares against the solar torque of a unit
-κ over the same batch (``estimator.trim``).  What that assumes known is
+κ over the same batch (``estimator.analysis.trim``).  What that assumes known is
 ``ASSUMED_KNOWN``, written into every report.  docs/trim.md has the method and
 its validation.
 """
@@ -22,12 +22,18 @@ from dynprop.eom.gyrostat import (
     solar_torque,
     unloading_dipole,
 )
-from dynprop.estimator import model as em
-from dynprop.estimator.covariance import torque_noise_density
-from dynprop.estimator.kalman import FilterResult, kalman_filter, unpack
-from dynprop.estimator.preprocess import yaw_momentum
-from dynprop.estimator.transition import discretize
-from dynprop.estimator.trim import KappaFit, Recommendation, equivalent_states, fit_kappa, recommend
+from dynprop.estimator.analysis.trim import (
+    KappaFit,
+    Recommendation,
+    equivalent_states,
+    fit_kappa,
+    recommend,
+)
+from dynprop.estimator.kalman.filter import FilterResult, kalman_filter, unpack
+from dynprop.estimator.kalman.preprocess import yaw_momentum
+from dynprop.estimator.linear import model as em
+from dynprop.estimator.linear.noise import torque_noise_density
+from dynprop.estimator.linear.transition import discretize
 from dynprop.sim import geomag
 from dynprop.sim.frames import nadir_body
 

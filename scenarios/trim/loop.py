@@ -3,7 +3,7 @@ own telemetry every N days and moves the tab as `dynprop trim` recommends, from
 the next sample on (issue 15, item 4; docs/trim.md).
 
 It lives in the producer, beside the truth it steers: ``TrimSteering`` is the
-run engine's steering (``run.producer``), which the command layer hands the run.
+run engine's steering (``run.stream.producer``), which the command layer hands the run.
 At the end of each span of N whole days (N day windows) the span's telemetry goes
 through ``batch.estimate_kappa``: the same batch filter, known torques, fit and 3σ rule as
 `dynprop trim`, knowing the tab it commanded last.  A significant κ̂ moves the
@@ -111,7 +111,7 @@ class TrimLoop:
 
 
 class TrimSteering:
-    """The trim loop as a streamed run's steering (``run.producer``'s module doc):
+    """The trim loop as a streamed run's steering (``run.stream.producer``'s module doc):
     a ``TrimLoop`` in the producer, and summary.json's ``trim_loop`` section."""
 
     def __init__(self, s: Scenario):

@@ -199,7 +199,7 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
     """Fly the recommended tab from the start to the batch end (the same span and
     seed; telemetry written), into ``stage``/verify, and estimate κ again there."""
     from ..files.rundir import staged_run_dir
-    from ..run.streamrun import stream_to_directory
+    from ..run.stream.directory import stream_to_directory
     new = load_scenario(run_dir / "scenario.yaml", [
         f"environment.solar.trim_tab_deg={r.rec.trim_tab_deg_new!r}",
         f"duration_s={r.batch.to_s!r}", "output.telemetry=true"])

@@ -1,5 +1,5 @@
 """The fit of `dynprop tune`: which noise parameters, their bounds, the maximum of
-the likelihood (``estimator.tune``), what each estimate is worth, the noise the
+the likelihood (``estimator.tuning.maximum``), what each estimate is worth, the noise the
 filter is given, and the filter's innovations before and after."""
 
 from __future__ import annotations
@@ -10,13 +10,13 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from dynprop.estimator.consistency import chi2_bounds, whiteness
-from dynprop.estimator.covariance import approx_yaw_variance
-from dynprop.estimator.covariance_report import covariance_report
-from dynprop.estimator.likelihood import NOISE_KEYS, Likelihood, noise_model
-from dynprop.estimator.model import ProcessNoise
-from dynprop.estimator.transition import discretize
-from dynprop.estimator.tune import (
+from dynprop.estimator.analysis.covariance import approx_yaw_variance
+from dynprop.estimator.analysis.covariance_report import covariance_report
+from dynprop.estimator.kalman.consistency import chi2_bounds, whiteness
+from dynprop.estimator.linear.model import ProcessNoise
+from dynprop.estimator.linear.transition import discretize
+from dynprop.estimator.tuning.likelihood import NOISE_KEYS, Likelihood, noise_model
+from dynprop.estimator.tuning.maximum import (
     DETERMINED_SIGMA,
     WEAK_SIGMA,
     Fit,
@@ -145,7 +145,7 @@ def diagnostics(lik: Likelihood, theta, src: TuneSource, noise: ProcessNoise,
     dt = src.scenario.sample_interval_s
     lags = int(round(MAX_LAG_S / dt))
     nis, white, rho, hourly = {}, {}, {}, {}
-    from dynprop.estimator.consistency import autocorrelation
+    from dynprop.estimator.kalman.consistency import autocorrelation
     per_hour = int(round(3600 / dt))
     for i, kind in enumerate(("roll", "yaw", "h")):
         ok = np.isfinite(e[:, i])

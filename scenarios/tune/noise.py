@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dynprop.estimator.likelihood import NOISE_KEYS
+from dynprop.estimator.tuning.likelihood import NOISE_KEYS
 
 from .source import TuneError
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from dynprop.estimator.covariance import PAPER_SIGMA_YAW_DEG
-from dynprop.estimator.likelihood import NOISE_KEYS
+from dynprop.estimator.analysis.covariance import PAPER_SIGMA_YAW_DEG
+from dynprop.estimator.tuning.likelihood import NOISE_KEYS
 
 from .fit import ROLL, Diagnostics, TuneOptions, TuneResult, tune
 from .source import read_source

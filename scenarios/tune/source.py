@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from dynprop.estimator.kalman import Measurements
-from dynprop.estimator.model import ModelParams, ProcessNoise
+from dynprop.estimator.kalman.filter import Measurements
+from dynprop.estimator.linear.model import ModelParams, ProcessNoise
 
 from ..bridge.inputs import initial_prior, prepared_inputs, telemetry_inputs
 from ..config import build

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator.kalman import Measurements
-from estimator.model import H_WHEEL, N_STATES, ModelParams, ProcessNoise, R, Y
-from estimator.transition import discretize
+from estimator.kalman.filter import Measurements
+from estimator.linear.model import H_WHEEL, N_STATES, ModelParams, ProcessNoise, R, Y
+from estimator.linear.transition import discretize
 
 DT = 0.512
 # GOES-Next numbers from the paper (Section 2, Eq. 1), typed here independently.

@@ -2,7 +2,7 @@
 
 The compiled steps against plain-numpy references and against the paper's filter;
 then the physics on the linear model's own measurements (Eq. 11 driven by noise of
-exactly the filter's statistics, the paper's R from ``estimator.covariance``): biases
+exactly the filter's statistics, the paper's R from ``estimator.analysis.covariance``): biases
 recovered and consistent, spikes gated, a random walk's σ growing as √(q t), and what
 the measurements cannot separate (a constant bias from a constant torque).
 
@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from estimator.augmented import (
+from estimator.analysis.observability import rank_progression, unobservable_subspace
+from estimator.augmented.filter import (
     BiasModel,
     _roll,
     augmented_filter,
@@ -28,21 +29,11 @@ from estimator.augmented import (
     dense_augmented_smoother,
     measurement_row,
 )
-from estimator.augmented_steps import engine
-from estimator.covariance import h_variance, roll_variance, yaw_variance
-from estimator.kalman import ExtraNoise, Measurements, kalman_filter, rts_smoother
-from estimator.model import (
-    H_WHEEL,
-    N_STATES,
-    NCX,
-    NCZ,
-    ProcessNoise,
-    R,
-    Y,
-    input_vector,
-)
-from estimator.observability import rank_progression, unobservable_subspace
-from estimator.transition import discretize
+from estimator.augmented.steps import engine
+from estimator.kalman.filter import ExtraNoise, Measurements, kalman_filter, rts_smoother
+from estimator.linear.model import H_WHEEL, N_STATES, NCX, NCZ, ProcessNoise, R, Y, input_vector
+from estimator.linear.noise import h_variance, roll_variance, yaw_variance
+from estimator.linear.transition import discretize
 
 from .cov_helpers import cov_dev
 from .test_kalman import DT, NOISE, PARAMS
@@ -146,7 +137,7 @@ def test_compiled_filter_and_smoother_match_dense_numpy_reference(rng, bias):
 
 
 def test_without_biases_or_gate_it_is_the_papers_filter(rng):
-    """nb = 0, no gate: the same expressions as ``kalman_steps`` (measured bit for bit;
+    """nb = 0, no gate: the same expressions as ``kalman.steps`` (measured bit for bit;
     1e-12 allowed, as another compiler may order them otherwise); and a 9-state prior
     and its augmented form are one prior."""
     n = 3000

@@ -1,4 +1,4 @@
-"""Batch least squares (``estimator.batch``, ``batch_nonlinear``, ``batch_steps``) against
+"""Batch least squares (``estimator.batch``, ``batch.nonlinear``, ``batch.steps``) against
 independent references.
 
 The linear batch against the RTS smoother (with no process noise they minimise the
@@ -23,9 +23,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from estimator import batch_steps as bs
-from estimator import ekf_model as m
-from estimator.batch import (
+from estimator.batch import steps as bs
+from estimator.batch.linear import (
     BatchError,
     ConsiderCase,
     LinearData,
@@ -33,10 +32,11 @@ from estimator.batch import (
     linear_batch,
     solve_normal,
 )
-from estimator.batch_nonlinear import NonlinearData, Options, nonlinear_batch, run_pass
-from estimator.consistency import chi2_bounds
-from estimator.kalman import Measurements, kalman_filter, rts_smoother
-from estimator.model import (
+from estimator.batch.nonlinear import NonlinearData, Options, nonlinear_batch, run_pass
+from estimator.ekf import model as m
+from estimator.kalman.consistency import chi2_bounds
+from estimator.kalman.filter import Measurements, kalman_filter, rts_smoother
+from estimator.linear.model import (
     N_STATES,
     NCZ,
     STATE_NAMES,
@@ -44,8 +44,8 @@ from estimator.model import (
     dynamics_matrix,
     input_vector,
 )
-from estimator.propagate import propagate_lti, zoh
-from estimator.transition import discretize
+from estimator.linear.propagate import propagate_lti, zoh
+from estimator.linear.transition import discretize
 from rollout.chunks import ChunkedRollout
 from scenarios.bridge import batch as bb
 from scenarios.bridge.coordinates import model_truth, truth_torques
@@ -68,7 +68,7 @@ H_NOM = PARAMS.H_Nms
 J_NOM = np.array([[3364.4, 12.0, -8.0], [12.0, 954.9, 5.0], [-8.0, 5.0, 3461.4]])
 CANT = 1.656 * DEG
 WN = H_NOM / np.sqrt(J_NOM[0, 0] * J_NOM[2, 2])
-# Entries of J in ``batch_steps.CONSIDER_NONLINEAR`` order.
+# Entries of J in ``batch.steps.CONSIDER_NONLINEAR`` order.
 J_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 # A prior's 1σ (the scenarios' estimator.initial_sigma, rates in units of ω_n) and the
 # consider parameters' (batch.consider's defaults), as scales for the checks below.

@@ -7,9 +7,8 @@ import pytest
 from scipy.integrate import quad_vec
 from scipy.linalg import expm
 
-from estimator.covariance import (
+from estimator.analysis.covariance import (
     PAPER_SIGMA_YAW_DEG,
-    SensorSpecs,
     _apply,
     _compose,
     _discrete_model,
@@ -19,22 +18,16 @@ from estimator.covariance import (
     approx_yaw_variance,
     care_steady_state,
     closed_form_steady_state,
-    continuous_R,
-    h_variance,
     periodic_gap_covariance,
     reduced,
     riccati_rates,
-    ripple_noise_density,
     roll_tach_steady_state,
-    roll_variance,
     sigma_yaw_sweep,
-    torque_noise_density,
     van_loan,
-    yaw_variance,
 )
-from estimator.covariance_report import covariance_report, format_covariance_report
-from estimator.kalman import Measurements, kalman_filter, unpack
-from estimator.model import (
+from estimator.analysis.covariance_report import covariance_report, format_covariance_report
+from estimator.kalman.filter import Measurements, kalman_filter, unpack
+from estimator.linear.model import (
     H_WHEEL,
     N_STATES,
     ModelParams,
@@ -45,7 +38,16 @@ from estimator.model import (
     noise_density,
     pitch_bias_Nms,
 )
-from estimator.transition import discretize
+from estimator.linear.noise import (
+    SensorSpecs,
+    continuous_R,
+    h_variance,
+    ripple_noise_density,
+    roll_variance,
+    torque_noise_density,
+    yaw_variance,
+)
+from estimator.linear.transition import discretize
 
 from .cov_helpers import cov_dev
 
@@ -245,7 +247,7 @@ def test_periodic_gap_matches_the_kalman_filter_over_a_day(gap):
     """The periodic solution of ``periodic_gap_covariance`` (doubling of the Riccati map in
     scaled coordinates, Van Loan Φ and Q_d) against the compiled filter of
     ``estimator.kalman`` (sequential Joseph updates, closed-form Φ and Q_d of
-    ``estimator.transition``) over one day: roll and h every 0.512 s, yaw absent over the
+    ``estimator.linear.transition``) over one day: roll and h every 0.512 s, yaw absent over the
     8 h gap at the end of the day.
 
     The filter starts from the periodic solution at the matching phase (the gap end, a

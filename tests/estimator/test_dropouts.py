@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.preprocess import _bridge_q, dropout_wheel_noise, wheel_torque
+from estimator.kalman.preprocess import _bridge_q, dropout_wheel_noise, wheel_torque
 
 DT = 0.512
 

@@ -9,10 +9,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from estimator import ekf_model as m
-from estimator.consistency import chi2_bounds, fraction_inside, nees
-from estimator.ekf import EkfInputs, ekf_filter, initial_state
-from estimator.kalman import unpack
+from estimator.ekf import model as m
+from estimator.ekf.filter import EkfInputs, ekf_filter, initial_state
+from estimator.kalman.consistency import chi2_bounds, fraction_inside, nees
+from estimator.kalman.filter import unpack
 from rollout.chunks import ChunkedRollout
 
 DT = 0.512

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from estimator.consistency import chi2_bounds, fraction_inside, nees, nis
-from estimator.kalman import (
+from estimator.kalman.consistency import chi2_bounds, fraction_inside, nees, nis
+from estimator.kalman.filter import (
     ExtraNoise,
     FilterResult,
     Measurements,
@@ -26,7 +26,7 @@ from estimator.kalman import (
     rts_smoother,
     unpack,
 )
-from estimator.model import (
+from estimator.linear.model import (
     H_WHEEL,
     N_STATES,
     ModelParams,
@@ -310,8 +310,8 @@ def test_bad_inputs_are_rejected():
 
 def test_closed_form_discretization_drives_the_filter_like_expm(rng):
     """The filter's Φ, Γ, Q_d in production come from the closed forms
-    (estimator.transition); they must give the expm/Van Loan filter's results."""
-    from estimator.transition import discretize
+    (estimator.linear.transition); they must give the expm/Van Loan filter's results."""
+    from estimator.linear.transition import discretize
     closed = discretize(PARAMS, NOISE, DT)
     n = 4000
     u = input_vector(PARAMS, 2e-6, -1e-6, 3e-6) * np.ones((n, 1))

@@ -1,5 +1,5 @@
 """The paper filter's log-likelihood and its derivatives in the noise parameters
-(estimator/likelihood.py) against independent references.
+(estimator/tuning/likelihood.py) against independent references.
 
 References:
 
@@ -26,10 +26,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.kalman import ExtraNoise, Measurements, kalman_filter
-from estimator.likelihood import Likelihood, dense_loglik, noise_model
-from estimator.model import N_STATES, ProcessNoise, input_vector
-from estimator.transition import discretize
+from estimator.kalman.filter import ExtraNoise, Measurements, kalman_filter
+from estimator.linear.model import N_STATES, ProcessNoise, input_vector
+from estimator.linear.transition import discretize
+from estimator.tuning.likelihood import Likelihood, dense_loglik, noise_model
 
 from .lik_helpers import (
     DT,

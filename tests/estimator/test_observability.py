@@ -5,16 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimator.model import (
-    N_STATES,
-    NCZ,
-    ModelParams,
-    Y,
-    dynamics_matrix,
-    measurement_rows,
-    pitch_bias_Nms,
-)
-from estimator.observability import (
+from estimator.analysis.observability import (
     default_tol,
     format_rank_table,
     full_rank_power,
@@ -25,6 +16,15 @@ from estimator.observability import (
     unobservable_direction,
     unobservable_subspace,
     unscaled_rank_progression,
+)
+from estimator.linear.model import (
+    N_STATES,
+    NCZ,
+    ModelParams,
+    Y,
+    dynamics_matrix,
+    measurement_rows,
+    pitch_bias_Nms,
 )
 
 

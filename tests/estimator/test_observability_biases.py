@@ -1,4 +1,4 @@
-"""Observability of the state augmented with sensor biases (estimator.observability,
+"""Observability of the state augmented with sensor biases (estimator.analysis.observability,
 ``format_bias_table``; `dynprop observability --biases`).
 
 Independent references:
@@ -23,7 +23,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.model import (
+from estimator.analysis.observability import (
+    bias_configurations,
+    bias_observability_results,
+    format_bias_table,
+    format_rank_table,
+    rank_progression,
+)
+from estimator.augmented.model import BIAS_NAMES
+from estimator.linear.model import (
     H_WHEEL,
     N_STATES,
     NCX,
@@ -33,14 +41,6 @@ from estimator.model import (
     Y,
     dynamics_matrix,
     pitch_bias_Nms,
-)
-from estimator.observability import (
-    BIAS_NAMES,
-    bias_configurations,
-    bias_observability_results,
-    format_bias_table,
-    format_rank_table,
-    rank_progression,
 )
 from scenarios.cli import main
 
@@ -253,7 +253,7 @@ def test_the_scenarios_own_biases_by_default(capsys):
 
 def test_the_augmented_filters_model_is_the_same():
     """``estimator.augmented`` (the filter) builds the same F_a and rows."""
-    augmented = pytest.importorskip("estimator.augmented")
+    augmented = pytest.importorskip("estimator.augmented.filter")
     bias = augmented.BiasModel(BIAS_NAMES, (1e-4,) * 4, (0.0,) * 4)
     F, G, _ = hand_system(["dss"], True)
     np.testing.assert_array_equal(augmented.augmented_model(P, bias), F)

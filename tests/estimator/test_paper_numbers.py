@@ -15,11 +15,11 @@ import math
 import numpy as np
 import pytest
 
-from estimator.covariance import (
+from estimator.analysis.covariance import approx_yaw_variance, closed_form_steady_state
+from estimator.linear.model import ModelParams, pitch_bias_Nms, yaw_momentum_Nms
+from estimator.linear.noise import (
     SIDEREAL_DAY_S,
     SensorSpecs,
-    approx_yaw_variance,
-    closed_form_steady_state,
     combined_variance,
     continuous_R,
     h_variance,
@@ -28,7 +28,6 @@ from estimator.covariance import (
     tach_variance,
     torque_noise_density,
 )
-from estimator.model import ModelParams, pitch_bias_Nms, yaw_momentum_Nms
 
 # --- the paper's inputs, as printed --------------------------------------------------
 IX, IY, IZ = 3364.376, 954.936, 3461.393        # Section 2, kg m²

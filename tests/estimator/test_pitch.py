@@ -22,18 +22,16 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from estimator.consistency import chi2_bounds, nees
-from estimator.pitch import (
+from estimator.kalman.consistency import chi2_bounds, nees
+from estimator.pitch.filter import pitch_filter, rts_smoother, unpack
+from estimator.pitch.model import (
     PitchNoise,
     PitchParams,
     c_fun,
     continuous_model,
     discretize,
-    pitch_filter,
-    rts_smoother,
     steady_state,
     stiffness,
-    unpack,
 )
 from sim.frames import GeoOrbit
 from sim.linearize import linearize_about_nominal

@@ -1,12 +1,12 @@
-"""``estimator.savgol``: scipy.signal's Savitzky–Golay derivative without importing
+"""``estimator.kalman.savgol``: scipy.signal's Savitzky–Golay derivative without importing
 scipy.signal (0.4 s of every command's start-up)."""
 
 import numpy as np
 import pytest
 from scipy.signal import savgol_filter
 
-from estimator.preprocess import wheel_torque
-from estimator.savgol import savgol_derivative
+from estimator.kalman.preprocess import wheel_torque
+from estimator.kalman.savgol import savgol_derivative
 
 CASES = [(n, *c) for n in (5, 40, 1000, 20_001)
          for c in ((3, 2, 1), (39, 2, 1), (41, 2, 1), (39, 3, 2), (5, 1, 0), (5, 1, 2))

@@ -1,4 +1,4 @@
-"""The filters with each sample's own Δt (``estimator.steps``): telemetry at any
+"""The filters with each sample's own Δt (``estimator.linear.steps``): telemetry at any
 cadence, with jitter and gaps, against independent references.
 
 Φ, Γ and Q_d of each step here come from scipy's expm and Van Loan's method
@@ -8,12 +8,12 @@ the per-step bookkeeping and the closed forms together."""
 import numpy as np
 import pytest
 
-from estimator import ekf_model as em
-from estimator.ekf import ekf_filter
-from estimator.kalman import ExtraNoise, Measurements, kalman_filter, rts_smoother
-from estimator.model import N_STATES, ProcessNoise
-from estimator.steps import StepTable, discretize_many, step_intervals
-from estimator.transition import discretize
+from estimator.ekf import model as em
+from estimator.ekf.filter import ekf_filter
+from estimator.kalman.filter import ExtraNoise, Measurements, kalman_filter, rts_smoother
+from estimator.linear.model import N_STATES, ProcessNoise
+from estimator.linear.steps import StepTable, discretize_many, step_intervals
+from estimator.linear.transition import discretize
 
 from .cov_helpers import cov_dev
 from .test_kalman import NOISE, P0, PARAMS, R_H, R_ROLL, R_YAW, expm_discretization
@@ -153,7 +153,7 @@ def test_ekf_long_steps_are_cut_into_nominal_sub_steps(gap_steps, rng):
     """The EKF cuts a step of n × the nominal Δt into n sub-steps without measurements:
     exactly the fixed-step EKF with those samples missing (the same arithmetic; 1e-12
     of σ allows another rounding of the per-step Δt)."""
-    from estimator.ekf import EkfInputs
+    from estimator.ekf.filter import EkfInputs
 
     from .test_ekf import PM, WN, _prior, _twin_data
     n = 300

@@ -1,4 +1,4 @@
-"""The closed-form propagation (estimator/transition.py) against independent references.
+"""The closed-form propagation (estimator/linear/transition.py) against independent references.
 
 References: scipy's expm of Fτ (Φ and its blocks φ, θ, ψ), of the augmented matrix
 [[F, I], [0, 0]]τ (Γ) and Van Loan's [[−F, Q], [0, Fᵀ]]τ (Q_d; Van Loan 1978); an exact
@@ -16,8 +16,8 @@ import scipy.linalg as sl
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimator.model import ModelParams, ProcessNoise, blocks, dynamics_matrix, noise_density
-from estimator.transition import (
+from estimator.linear.model import ModelParams, ProcessNoise, blocks, dynamics_matrix, noise_density
+from estimator.linear.transition import (
     Discretization,
     discretize,
     input_integral,

@@ -1,4 +1,4 @@
-"""The κ fit of `dynprop trim` (estimator.trim) against references it does not use:
+"""The κ fit of `dynprop trim` (estimator.analysis.trim) against references it does not use:
 the model's own torque form, generalised least squares' χ² statistics, and the
 imbalance law of the truth's SolarTorque."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimator.trim import equivalent_states, fit_kappa, recommend, torque_basis
+from estimator.analysis.trim import equivalent_states, fit_kappa, recommend, torque_basis
 from sim.environment import SolarTorque
 
 W0 = 7.2921e-5

@@ -1,4 +1,4 @@
-"""Noise tuning by maximum likelihood (estimator/tune.py) on telemetry drawn from the
+"""Noise tuning by maximum likelihood (estimator/tuning/maximum.py) on telemetry drawn from the
 filter's own linear model, where the answer is known: θ_true, the noise the data
 were drawn with (``lik_helpers.simulate``: x_{k+1} = Φ x_k + w_k, w ~ N(0, Q_d(θ_true)),
 roll, yaw and h with the stated variances, a Sun gap in yaw).
@@ -8,7 +8,7 @@ this long, Gaussian with the inverse Fisher information as covariance); central
 differences of ``Likelihood.evaluate`` for the gradient at the optimum (no use of the
 score the optimiser climbs with); scipy's L-BFGS-B on −ln L in ln θ, with a gradient
 from central differences, as an independent maximiser; and the filter's consistency
-functions (estimator/consistency.py) against series with known autocorrelation.
+functions (estimator/kalman/consistency.py) against series with known autocorrelation.
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ import pytest
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
-from estimator.consistency import autocorrelation, whiteness
-from estimator.likelihood import Likelihood, noise_model
-from estimator.model import N_STATES, ProcessNoise
-from estimator.transition import discretize
-from estimator.tune import LIMIT_DROP, maximize, nearest_allowed, profile
+from estimator.kalman.consistency import autocorrelation, whiteness
+from estimator.linear.model import N_STATES, ProcessNoise
+from estimator.linear.transition import discretize
+from estimator.tuning.likelihood import Likelihood, noise_model
+from estimator.tuning.maximum import LIMIT_DROP, maximize, nearest_allowed, profile
 
 from .lik_helpers import DT, P0, PARAMS, measurements, simulate
 

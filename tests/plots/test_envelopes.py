@@ -7,7 +7,7 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 
-from estimator.covariance import PAPER_SIGMA_YAW_DEG
+from estimator.analysis.covariance import PAPER_SIGMA_YAW_DEG
 from plots.consistency import plot_consistency
 from plots.errors import plot_errors
 

@@ -15,7 +15,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from estimator.covariance import PAPER_SIGMA_YAW_DEG  # noqa: E402
+from estimator.analysis.covariance import PAPER_SIGMA_YAW_DEG  # noqa: E402
 from plots import reduce  # noqa: E402
 from plots.consistency import nees_verdict, plot_consistency  # noqa: E402
 from plots.errors import plot_errors, plot_estimates  # noqa: E402

@@ -23,7 +23,7 @@ import pytest
 
 import dynprop
 from dynprop.results import BatchResult
-from estimator.batch import BatchError
+from estimator.batch.linear import BatchError
 from scenarios.batch import report as batch_report
 from scenarios.files.csvio import read_csv
 

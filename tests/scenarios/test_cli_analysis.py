@@ -56,7 +56,7 @@ def test_h_variance_follows_the_wheel_configuration():
     backup configuration (I_w sin c)² + I_rw², its yaw reaction wheel along z."""
     import numpy as np
 
-    from estimator.covariance import h_variance, tach_variance
+    from estimator.linear.noise import h_variance, tach_variance
     from scenarios.config.build import estimator_sensor_specs
     from scenarios.config.loader import load_scenario
 
@@ -105,14 +105,14 @@ def test_covariance_weighs_yaw_as_a_run_does_and_says_so(capsys):
 def test_nine_state_yaw_all_day_is_the_dare(inflation):
     """With yaw every sample (no gap) the report's 9-state σ_yaw is the a-priori steady
     state of the discrete filter: scipy's solve_discrete_are on the closed-form Φ, Q_d
-    (estimator.transition) with roll, yaw and h rows, R_yaw = spec × ``inflation``."""
+    (estimator.linear.transition) with roll, yaw and h rows, R_yaw = spec × ``inflation``."""
     import numpy as np
     from scipy.linalg import solve_discrete_are
 
-    from estimator.covariance import h_variance, roll_variance, yaw_variance
-    from estimator.covariance_report import covariance_report
-    from estimator.model import H_WHEEL, N_STATES, R, Y
-    from estimator.transition import discretize
+    from estimator.analysis.covariance_report import covariance_report
+    from estimator.linear.model import H_WHEEL, N_STATES, R, Y
+    from estimator.linear.noise import h_variance, roll_variance, yaw_variance
+    from estimator.linear.transition import discretize
     from scenarios.config.build import estimator_model, estimator_sensor_specs
     from scenarios.config.loader import load_scenario
 

@@ -19,8 +19,8 @@ import pytest
 import yaml
 from scipy import stats
 
-from estimator.consistency import chi2_bounds, fraction_inside, nees
-from estimator.kalman import unpack
+from estimator.kalman.consistency import chi2_bounds, fraction_inside, nees
+from estimator.kalman.filter import unpack
 from scenarios.cli import main
 from scenarios.config.loader import load_scenario
 from scenarios.files.columns import STATE_COLUMNS

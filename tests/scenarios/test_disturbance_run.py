@@ -15,7 +15,7 @@ from scenarios.config.loader import load_scenario, validate
 from scenarios.config.schema import resolved_yaml
 from scenarios.files.csvio import read_csv, write_csv
 from scenarios.run.simulate import simulate
-from scenarios.run.streamrun import stream_to_directory
+from scenarios.run.stream.directory import stream_to_directory
 from sim.disturbance import draw
 from sim.telemetry import make_telemetry
 

@@ -8,7 +8,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from estimator import ekf_model as m
+from estimator.ekf import model as m
 from scenarios.bridge.coordinates import external_torque
 from scenarios.config import build
 from scenarios.config.loader import load_scenario

@@ -18,7 +18,7 @@ import pytest
 
 from scenarios.cli import main
 from scenarios.config.loader import load_scenario
-from scenarios.run.streamrun import stream_to_directory
+from scenarios.run.stream.directory import stream_to_directory
 
 # 17:00 local at 75° W on the equinox: a night Sun gap ends inside 14 h.
 RUN = ["duration_s=50400", "epoch_utc=2026-03-20T22:00:00Z", "output.interval_s=64",

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from scenarios.files.rundir import clean_stale_handoffs
-from scenarios.run import handoff
+from scenarios.run.stream import handoff
 
 
 @pytest.fixture

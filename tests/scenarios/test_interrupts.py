@@ -190,7 +190,7 @@ def test_a_run_killed_with_sigkill_leaves_nothing_after_the_next_run(tmp_path):
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in runs.iterdir()) == ["next"]
     assert "removed" in done.stderr and ".killed.stage-" in done.stderr
-    # Its records in shared memory (scenarios.run.handoff) went with the next command too.
+    # Its records in shared memory (scenarios.run.stream.handoff) went with the next command too.
     assert not list(Path("/dev/shm").glob(f"dynprop-{proc.pid}-*"))
 
 

@@ -1,5 +1,5 @@
 """`dynprop estimate` on telemetry off the filter's grid: a 1.0 s cadence, ±50 ms
-jitter and a 3 h gap, each sample filtered at its own time (``estimator.steps``).
+jitter and a 3 h gap, each sample filtered at its own time (``estimator.linear.steps``).
 
 The files are made from a run's own full-rate telemetry, its values interpolated
 linearly to the new times (a sensor sampling there would read the attitude there);
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.covariance_report import covariance_report
+from estimator.analysis.covariance_report import covariance_report
 from scenarios.bridge.covariance import dss_yaw_weighting
 from scenarios.config import build
 from scenarios.config.loader import load_scenario

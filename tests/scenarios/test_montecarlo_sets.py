@@ -23,7 +23,7 @@ import pytest
 import yaml
 from scipy import stats
 
-from estimator.consistency import chi2_bounds
+from estimator.kalman.consistency import chi2_bounds
 from scenarios.config.loader import ScenarioError, load_scenario
 from scenarios.montecarlo.dispersions import draw_case
 

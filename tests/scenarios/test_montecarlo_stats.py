@@ -242,7 +242,7 @@ def _groups(diagnosis: str) -> dict[str, set[str]]:
 def test_diagnosis_places_every_state_against_its_chi2_bounds(runs):
     """Every state is listed, in the group its χ²(N)/N bounds put it in: with 6 runs
     roll rate (0.32) and yaw (0.28) are inside [0.21, 2.4], with 50 below [0.64, 1.4]."""
-    from estimator.consistency import chi2_bounds
+    from estimator.kalman.consistency import chi2_bounds
     from scenarios.montecarlo.stats import diagnose, per_state_test
     lo, hi = chi2_bounds(1, runs)
     states = dict(SIX_CASES, N_cz_Nm=3.0)       # one state above, too

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from estimator.model import H_WHEEL, R, Y, project_torques
-from estimator.transition import psi_closed
+from estimator.linear.model import H_WHEEL, R, Y, project_torques
+from estimator.linear.transition import psi_closed
 from scenarios.config import build
 from scenarios.config.loader import validate
 from scenarios.run.simulate import simulate

@@ -17,8 +17,8 @@ import pytest
 from scipy import stats
 from scipy.linalg import expm, solve_discrete_are
 
-from estimator.consistency import chi2_bounds
-from estimator.pitch import PitchNoise, continuous_model
+from estimator.kalman.consistency import chi2_bounds
+from estimator.pitch.model import PitchNoise, continuous_model
 from scenarios.config import build
 from scenarios.config.loader import load_scenario
 from scenarios.files.csvio import read_csv
@@ -26,7 +26,7 @@ from scenarios.run.ekf import run_ekf
 from scenarios.run.estimate import estimate_inputs, estimate_to_directory
 from scenarios.run.pitch import run_pitch
 from scenarios.run.simulate import simulate
-from scenarios.run.streamrun import stream_to_directory
+from scenarios.run.stream.directory import stream_to_directory
 from scenarios.units import DEG
 from sim.frames import euler312_from_quat
 

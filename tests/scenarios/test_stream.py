@@ -1,5 +1,5 @@
-"""`dynprop run` streamed in windows (``scenarios.run``: stream, stages, streamrun, tally,
-daily, files.decimate).
+"""`dynprop run` streamed in windows (``scenarios.run.stream``: windows, stages, directory;
+``scenarios.run``: tally, daily; files.decimate).
 
 Identity is the requirement for what does not depend on the window cut: the truth,
 its telemetry and the real filter continue across a window boundary exactly as in
@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimator.model import Y
+from estimator.linear.model import Y
 from scenarios.config.loader import load_scenario
 from scenarios.files.csvio import read_csv
-from scenarios.run.streamrun import stream_to_directory
+from scenarios.run.stream.directory import stream_to_directory
 
 HOUR = 3600.0
 # 17:00 local at 75° W on the equinox: the night Sun gap (~20:08–04:00 local) falls
@@ -103,9 +103,9 @@ def test_per_window_figures_stay_close_to_the_one_window_run(one_window, windows
 def _whole_run_filter(s):
     """The paper's filter over the run in one window with its covariance history and
     inputs (``stages.filtered``'s record, before the smoother lightens it)."""
-    from scenarios.run import stages, stream
-    from scenarios.run.producer import producer
-    demux = stream.Demux(producer(s))
+    from scenarios.run.stream import stages, windows
+    from scenarios.run.stream.producer import producer
+    demux = windows.Demux(producer(s))
     records = stages.filtered(s, demux.reals())
     next(records)
     (rec,) = records
@@ -122,11 +122,11 @@ def test_the_smoother_restarts_inside_a_window_longer_than_its_overlap():
     stay within a small part of σ of the whole run's smoother."""
     # The smoother's API as the stream imports it (``estimator.kalman`` would be a
     # second copy of the module).
-    from dynprop.estimator.kalman import ExtraNoise, FilterResult, rts_smoother
-    from dynprop.estimator.transition import discretize
+    from dynprop.estimator.kalman.filter import ExtraNoise, FilterResult, rts_smoother
+    from dynprop.estimator.linear.transition import discretize
 
     from scenarios.config import build
-    from scenarios.run.stream import windows_of
+    from scenarios.run.stream.windows import windows_of
 
     s = load_scenario("goes_next_equinox", ["duration_s=172800", GAP_EPOCH])
     records = windows_of(s, window_samples=100_000)
@@ -229,7 +229,7 @@ def test_daily_rows_count_the_eclipse_and_the_gap_end(one_window):
 
 
 def test_a_run_over_two_days_is_cut_into_days_and_reports_them(tmp_path_factory):
-    from scenarios.run.plan import window_bounds
+    from scenarios.run.stream.plan import window_bounds
     n_day = 168_750
     assert window_bounds(2 * n_day + 1, 0.512) == [(0, 2 * n_day + 1)]
     b = window_bounds(3 * n_day + 1, 0.512)
@@ -330,11 +330,11 @@ def test_an_error_while_the_figures_are_drawn_comes_out_and_stops_them(tmp_path,
     table is asked, not ``multiprocessing.active_children()``: when the pool's
     manager thread and ``workers.worker_pool`` both join a killed worker, the one
     that loses the race keeps listing it as started although it is gone."""
-    from scenarios.run import stream
+    from scenarios.run.stream import windows
 
     def full_disk(self):
         raise OSError(28, "No space left on device")
-    monkeypatch.setattr(stream.Demux, "drain", full_disk)
+    monkeypatch.setattr(windows.Demux, "drain", full_disk)
     s = load_scenario("goes_next_equinox", ["duration_s=7200"])
     before = _running_children()
     with pytest.raises(OSError, match="No space left"):

@@ -19,7 +19,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from estimator.model import N_STATES, Y
+from estimator.linear.model import N_STATES, Y
 from scenarios.config import build
 from scenarios.config.loader import load_scenario
 from scenarios.files.summary import assemble_summary

@@ -20,9 +20,9 @@ import pytest
 import yaml
 
 import dynprop
-from estimator.kalman import ExtraNoise, kalman_filter
-from estimator.model import ProcessNoise
-from estimator.transition import discretize
+from estimator.kalman.filter import ExtraNoise, kalman_filter
+from estimator.linear.model import ProcessNoise
+from estimator.linear.transition import discretize
 from scenarios.config.loader import load_scenario
 from scenarios.tune.source import read_source
 

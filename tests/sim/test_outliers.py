@@ -26,8 +26,8 @@ import pytest
 from scenarios.config import build
 from scenarios.config.loader import ScenarioError, load_scenario
 from scenarios.config.schema import Scenario
-from scenarios.run.producer import producer
 from scenarios.run.simulate import simulate
+from scenarios.run.stream.producer import producer
 from sim.sensors import NoiseStream, SensorSuite, draw_ahead
 from sim.telemetry import make_telemetry, sense_window
 

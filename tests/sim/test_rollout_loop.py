@@ -10,7 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from estimator.kalman_steps import N_STATES, N_UT, PHI_PATTERN, filter_step, pack
+from estimator.kalman.steps import N_STATES, N_UT, PHI_PATTERN, filter_step, pack
 from rollout import compiled
 from rollout.chunks import ChunkedRollout, build_chunk
 

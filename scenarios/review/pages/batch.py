@@ -16,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files.csvio import read_csv
-from . import traces as tr
-from .cells import Table, cell, text
-from .page_parts import closing, record_table, run_dir_of, verdict, vline
-from .render import Page, Section
-from .run_figures import STARTUP_S, Plot
-from .source import ReportInputError, Source, read_json
+from ...files.csvio import read_csv
+from .. import traces as tr
+from ..cells import Table, cell, text
+from ..page_parts import closing, record_table, run_dir_of, verdict, vline
+from ..render import Page, Section
+from ..run_figures import STARTUP_S, Plot
+from ..source import ReportInputError, Source, read_json
 
 BATCH = "batch.json"
 CSV = "estimate_batch.csv"

@@ -12,16 +12,16 @@ against the requirement.
 from __future__ import annotations
 
 import numpy as np
-from dynprop.estimator.covariance import PAPER_SIGMA_YAW_DEG
+from dynprop.estimator.analysis.covariance import PAPER_SIGMA_YAW_DEG
 from scipy.stats import binom
 
-from ..montecarlo.stats import nees_inside_needed
+from ...montecarlo.stats import nees_inside_needed
+from ..cells import Table, cell, text
+from ..page_parts import closing, finite, record_table, verdict
+from ..render import Page, Section
+from ..run_page import requirement_of
+from ..source import Source, read_json
 from . import ensemble_figures as figs
-from .cells import Table, cell, text
-from .page_parts import closing, finite, record_table, verdict
-from .render import Page, Section
-from .run_page import requirement_of
-from .source import Source, read_json
 
 MC = "montecarlo.json"
 NPZ = "montecarlo.npz"

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import traces as tr
-from .page_parts import PALETTE, spread_band, vline
-from .run_figures import Plot
+from .. import traces as tr
+from ..page_parts import PALETTE, spread_band, vline
+from ..run_figures import Plot
 
 STATES = ("roll", "roll rate", "yaw", "yaw rate", "h", "N_px", "N_pz", "N_cx", "N_cz")
 PANELS = ((0, "roll", "deg"), (2, "yaw", "deg"), (4, "h", "N m s"))

@@ -13,12 +13,12 @@ gap end, ``initial`` and ``plus_1deg``) and ``verdict`` (a paragraph).
 
 from __future__ import annotations
 
-from . import traces as tr
-from .cells import Table, cell, text
-from .page_parts import closing, record_table, verdict, wrap_markdown
-from .render import Page, Section
-from .run_figures import Plot
-from .source import Source
+from .. import traces as tr
+from ..cells import Table, cell, text
+from ..page_parts import closing, record_table, verdict, wrap_markdown
+from ..render import Page, Section
+from ..run_figures import Plot
+from ..source import Source
 
 REPORT = "report.json"
 COEFF = ("jacobian", "eq3", "rel_jacobian_vs_eq3", "eq7", "rel_eq7_vs_jacobian", "rel_eq5_only",

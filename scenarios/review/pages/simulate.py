@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..files.csvio import comments, read_csv
-from . import traces as tr
-from .cells import Table, cell, text
-from .page_parts import closing
-from .render import Page, Section
-from .run_figures import Plot
-from .source import ReportInputError, Source
+from ...files.csvio import comments, read_csv
+from .. import traces as tr
+from ..cells import Table, cell, text
+from ..page_parts import closing
+from ..render import Page, Section
+from ..run_figures import Plot
+from ..source import ReportInputError, Source
 
 SCENARIO = "scenario.yaml"
 TRUTH_COLUMNS = ("t_s", "yaw_deg", "roll_deg", "pitch_deg", "h_Nms", "eclipse")

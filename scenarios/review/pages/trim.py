@@ -9,9 +9,9 @@ at full trim.
 
 from __future__ import annotations
 
-from . import traces as tr
-from .cells import Table, cell, flatten, lookup, text, unit_of
-from .page_parts import (
+from .. import traces as tr
+from ..cells import Table, cell, flatten, lookup, text, unit_of
+from ..page_parts import (
     closing,
     finite,
     points_figure,
@@ -20,9 +20,9 @@ from .page_parts import (
     verdict,
     wrap_markdown,
 )
-from .render import Page, Section
-from .run_figures import Plot
-from .source import Source
+from ..render import Page, Section
+from ..run_figures import Plot
+from ..source import Source
 
 TRIM = "trim.json"
 # trim.json's keys shown in tables of their own.

@@ -6,9 +6,9 @@ each figure means: docs/tune.md).
 
 from __future__ import annotations
 
-from . import traces as tr
-from .cells import Table, cell, flatten, lookup, text, unit_of
-from .page_parts import (
+from .. import traces as tr
+from ..cells import Table, cell, flatten, lookup, text, unit_of
+from ..page_parts import (
     closing,
     finite,
     points_figure,
@@ -17,9 +17,9 @@ from .page_parts import (
     verdict,
     wrap_markdown,
 )
-from .render import Page, Section
-from .run_figures import Plot
-from .source import Source
+from ..render import Page, Section
+from ..run_figures import Plot
+from ..source import Source
 
 TUNE = "tune.json"
 FIELDS = ("status", "value", "sigma", "sigma_ln", "limit_95", "limit_side", "start", "applied",

@@ -20,24 +20,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import build
-from ..config.schema import Scenario, output_writes_telemetry, resolved_yaml
-from ..files.checks import add_checks
-from ..files.columns import estimate_columns, pitch_columns
-from ..files.csvio import CsvAppender, write_csv
-from ..files.decimate import ComparisonRows
-from ..files.summary import assemble_summary, eq55_sigma_yaw_deg, write_summary
-from ..samples import nees_rows, output_rows
-from ..units import DAY_S
-from ..workers import blas_one_thread
-from .daily import DailyTally
-from .filter_tally import FilterTally
-from .filtering import count_rejected, design_of, filter_section
-from .pitch import PitchTally
+from ...config import build
+from ...config.schema import Scenario, output_writes_telemetry, resolved_yaml
+from ...files.checks import add_checks
+from ...files.columns import estimate_columns, pitch_columns
+from ...files.csvio import CsvAppender, write_csv
+from ...files.decimate import ComparisonRows
+from ...files.summary import assemble_summary, eq55_sigma_yaw_deg, write_summary
+from ...samples import nees_rows, output_rows
+from ...units import DAY_S
+from ...workers import blas_one_thread
+from ..daily import DailyTally
+from ..filter_tally import FilterTally
+from ..filtering import count_rejected, design_of, filter_section
+from ..pitch import PitchTally
+from ..tally import RunTally
 from .process import producer_process
 from .producer import producer
-from .stream import windows_of
-from .tally import RunTally
+from .windows import windows_of
 
 LOG_EVERY_DAYS = 10
 
@@ -94,7 +94,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     plan = next(records)
     # The figures' modules (matplotlib: ~0.4 s) load while the producer simulates the
     # first window, rather than after the last.
-    from ..figures.run import plot_run_figures, run_figures_drawn
+    from ...figures.run import plot_run_figures, run_figures_drawn
     params, _ = build.estimator_model(s)
     dt = s.sample_interval_s
     n = plan.n_samples

@@ -23,7 +23,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from ..files.rundir import HANDOFF_PREFIX, SHM_ROOT, clean_stale_handoffs
+from ...files.rundir import HANDOFF_PREFIX, SHM_ROOT, clean_stale_handoffs
 
 MIN_OUT_OF_BAND = 1 << 16   # smaller records are not worth a file
 

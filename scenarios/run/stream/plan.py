@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..config.schema import Scenario, output_stride
-from ..units import DAY_S, HOUR_S
+from ...config.schema import Scenario, output_stride
+from ...units import DAY_S, HOUR_S
 
 SINGLE_WINDOW_S = 2 * DAY_S
 SMOOTHER_OVERLAP_S = 12 * HOUR_S

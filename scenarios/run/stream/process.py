@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from multiprocessing import get_context
 
-from ..config.schema import Scenario
-from ..workers import ignore_sigint, sigint_held
+from ...config.schema import Scenario
+from ...workers import ignore_sigint, sigint_held
 from . import handoff
 from .producer import producer
 

@@ -22,19 +22,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.linear.transition import discretize
 from dynprop.sim.telemetry import sense_window
 
-from ..bridge.coordinates import TruthTorques, model_truth, pitch_truth, truth_torques
-from ..bridge.inputs import telemetry_inputs
-from ..bridge.twin import TwinTruth, twin_window
-from ..config import build
-from ..config.schema import Scenario
-from ..files.columns import UtcTags, telemetry_columns, telemetry_lattices, truth_columns
-from ..files.csvio import CsvAppender
-from ..records import TruthWindow
-from ..samples import output_rows
-from ..units import DEG
+from ...bridge.coordinates import TruthTorques, model_truth, pitch_truth, truth_torques
+from ...bridge.inputs import telemetry_inputs
+from ...bridge.twin import TwinTruth, twin_window
+from ...config import build
+from ...config.schema import Scenario
+from ...files.columns import UtcTags, telemetry_columns, telemetry_lattices, truth_columns
+from ...files.csvio import CsvAppender
+from ...records import TruthWindow
+from ...samples import output_rows
+from ...units import DEG
 from .plan import make_plan
 from .twin_filter import TwinFilter, TwinTelemetry
 

@@ -11,26 +11,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator.consistency import nees
-from dynprop.estimator.ekf import EkfResult
-from dynprop.estimator.kalman import ExtraNoise, FilterResult, unpack
-from dynprop.estimator.transition import discretize
+from dynprop.estimator.ekf.filter import EkfResult
+from dynprop.estimator.kalman.consistency import nees
+from dynprop.estimator.kalman.filter import ExtraNoise, FilterResult, unpack
+from dynprop.estimator.linear.transition import discretize
 
-from ..bridge.inputs import initial_prior, padded_filter_inputs
-from ..config import build
-from ..config.schema import Scenario
-from ..records import FilterHistory, TruthWindow
-from ..samples import nees_rows
-from .ekf import EkfStream
-from .filtering import (
-    bias_columns,
-    design_of,
-    head,
-    paper_filter,
-    paper_smoother,
-    smoothed_full_x,
-)
-from .pitch import PitchHistory, PitchStream
+from ...bridge.inputs import initial_prior, padded_filter_inputs
+from ...config import build
+from ...config.schema import Scenario
+from ...records import FilterHistory, TruthWindow
+from ...samples import nees_rows
+from ..ekf import EkfStream
+from ..filtering import bias_columns, design_of, head, paper_filter, paper_smoother, smoothed_full_x
+from ..pitch import PitchHistory, PitchStream
 
 
 @dataclass(frozen=True)

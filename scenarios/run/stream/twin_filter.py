@@ -9,13 +9,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.estimator.consistency import nees
-from dynprop.estimator.kalman import unpack
+from dynprop.estimator.kalman.consistency import nees
+from dynprop.estimator.kalman.filter import unpack
 
-from ..bridge.inputs import initial_prior, padded_filter_inputs
-from ..records import FilterHistory, Measured, TwinWindow
-from ..samples import nees_rows
-from .filtering import design_of, paper_filter
+from ...bridge.inputs import initial_prior, padded_filter_inputs
+from ...records import FilterHistory, Measured, TwinWindow
+from ...samples import nees_rows
+from ..filtering import design_of, paper_filter
 
 
 @dataclass(frozen=True)

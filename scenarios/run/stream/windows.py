@@ -22,14 +22,14 @@ The pieces: ``plan`` cuts the run; ``producer`` (truth, telemetry, the twin and
 its filter, ``twin_filter``) yields typed records (``records``) and can run in a
 second process (``process``); ``stages`` filter and smooth the truth windows;
 ``windows_of`` here chains them and joins each window with its twin record;
-``streamrun`` accumulates and writes what comes out.
+``run.stream.directory`` accumulates and writes what comes out.
 """
 
 from __future__ import annotations
 
-from ..config import build
-from ..config.schema import Scenario
-from ..records import TruthWindow, TwinWindow, Window
+from ...config import build
+from ...config.schema import Scenario
+from ...records import TruthWindow, TwinWindow, Window
 from .producer import producer
 from .stages import filtered, smoothed
 
