@@ -1,8 +1,10 @@
 """The filter with sensor-bias states and outlier gating (``estimator.augmented``).
 
-The compiled steps against plain-numpy references and against the paper's filter;
-then the physics on the linear model's own measurements (Eq. 11 driven by noise of
-exactly the filter's statistics, the paper's R from ``estimator.analysis.covariance``): biases
+The compiled steps against a textbook reference written in the tests
+(``dense_reference``: its own prior, F_a, Q_a, expm/Van Loan discretisation and rows)
+and against the paper's filter; then the physics on the linear model's own
+measurements (Eq. 11 driven by noise of exactly the filter's statistics, drawn from the
+reference's prior and Φ, Q_d; the paper's R from ``estimator.analysis.covariance``): biases
 recovered and consistent, spikes gated, a random walk's σ growing as √(q t), and what
 the measurements cannot separate (a constant bias from a constant torque).
 
@@ -20,13 +22,10 @@ from estimator.augmented.filter import (
     BiasModel,
     _roll,
     augmented_filter,
-    augmented_matrices,
     augmented_model,
     augmented_params,
     augmented_prior,
     augmented_smoother,
-    dense_augmented_filter,
-    dense_augmented_smoother,
     measurement_row,
 )
 from estimator.augmented.steps import engine
@@ -35,6 +34,7 @@ from estimator.linear.model import H_WHEEL, N_STATES, NCX, NCZ, ProcessNoise, R,
 from estimator.linear.noise import h_variance, roll_variance, yaw_variance
 from estimator.linear.transition import discretize
 
+from . import dense_reference as ref
 from .cov_helpers import cov_dev
 from .test_kalman import DT, NOISE, PARAMS
 
@@ -50,14 +50,16 @@ YAW_BIAS = BiasModel.of(dss_yaw=(0.1 * DEG, 0.0))
 HEAD_BIAS = ("dss_yaw", "cass1_yaw", "cass2_yaw")
 
 
-def simulate(n_steps, n_runs, rng, bias, yaw_on, head, b_true=None, disc=DISC):
+def simulate(n_steps, n_runs, rng, bias, yaw_on, head, b_true=None):
     """Truth (n_steps, n_runs, 9 + nb) of the augmented linear model from its prior (the
     biases ``b_true`` if given) and the measurements r + b_roll, y + b_head (where
-    ``yaw_on``; a head without a bias state measures y) and h, with the paper's R."""
-    Phi, _, Qd, _ = augmented_matrices(disc, bias)
+    ``yaw_on``; a head without a bias state measures y) and h, with the paper's R.
+    Prior, Φ and Q_d are the reference's (``dense_reference``), not the package's."""
+    d = ref.discretization(PARAMS, NOISE, bias, DT)
+    Phi, Qd = d.Phi, d.Qd
     n = len(Phi)
     L = np.linalg.cholesky(Qd + 1e-40 * np.eye(n))
-    x = rng.multivariate_normal(np.zeros(n), augmented_prior(np.zeros(9), P0, bias)[1],
+    x = rng.multivariate_normal(np.zeros(n), ref.prior(np.zeros(9), P0, bias)[1],
                                 size=n_runs)
     if b_true is not None:
         x[:, N_STATES:] = b_true
@@ -96,11 +98,16 @@ def est_dev(x, x_ref, P_ref):
 def test_compiled_filter_and_smoother_match_dense_numpy_reference(rng, bias):
     """Every head in turn (with 'roll_and_cass1', DSS and CASS2 samples measure y alone),
     gaps in every measurement, inputs, extra noise, random walks and a gate with spikes
-    to reject: the compiled filter and smoother equal plain-numpy loops (the same
-    algorithm, other rounding).  Rounding differences are amplified where an update
-    cancels most of P (P0/R up to 250 in the first steps) and carried over the filter's
-    and the smoother's memory: measured ≤ 1.0e-12 in the filter's x (σ + |x| units) and
-    P, ≤ 1e-11 in the smoother's, the same with DYNPROP_BACKEND=vm; 1e-9 allowed."""
+    to reject: the compiled filter and smoother (closed-form Φ, Γ, Q_d) equal the
+    textbook reference of ``dense_reference`` (its own prior, augmented F and Q,
+    expm/Van Loan, rows), x, P, ν, S, the gate's decisions and the prior after the
+    run.  The two discretisations differ by ~1e-13 relative and rounding differences
+    are amplified where an update cancels most of P (P0/R up to 250 in the first steps)
+    and carried over the filter's and the smoother's memory: measured ≤ 9e-13 in the
+    filter's x (σ + |x| units), P, ν (σ units) and S, ≤ 1.7e-11 in the smoother's P,
+    the same with DYNPROP_BACKEND=vm; 1e-9 allowed.  Seen failing by 570 (a bias prior
+    of diag(σ0)), 0.8 (a yaw sample given another head's bias) and 9e-3 (q_b without
+    its Δt)."""
     n = 600
     u = input_vector(PARAMS, 1e-6 * np.sin(np.arange(n) / 50), -2e-6, 1e-5)
     yaw_on = np.arange(n) % 5 != 0
@@ -115,21 +122,30 @@ def test_compiled_filter_and_smoother_match_dense_numpy_reference(rng, bias):
                        discretize(PARAMS, ProcessNoise(0.0, 0.0, 1.0), DT).Qd)
     kw = dict(bias=bias, sun_head=head, gate_chi2=16.0, extra=extra)
     res = augmented_filter(meas(z), DISC, np.zeros(9), P0, u, **kw)
-    x_ref, P_ref, rej_ref = dense_augmented_filter(meas(z), DISC, np.zeros(9), P0, u, **kw)
+    f = ref.reference_filter(z, R3, DT, PARAMS, NOISE, bias, np.zeros(9), P0, u,
+                             sun_head=head, gate=16.0, extra_scale=extra.scale)
+    x_ref, P_ref = f.x, f.P
     # No gate decision within rounding of the threshold (it would flip on last bits).
     nis = res.innovations**2 / res.innovation_var
     assert np.nanmin(np.abs(nis / 16.0 - 1)) > 1e-6
-    assert np.array_equal(res.rejected, rej_ref)
+    assert np.array_equal(res.rejected, f.rejected)
     assert {200, 400} <= set(np.flatnonzero(res.rejected[:, 0]))
     assert {301, 501} <= set(np.flatnonzero(res.rejected[:, 1]))
     assert cov_dev(res.P, P_ref).max() < 1e-9
     assert est_dev(res.x, x_ref, P_ref).max() < 1e-9
+    assert cov_dev(res.P_next, f.P_next).max() < 1e-9
+    assert est_dev(res.x_next, f.x_next, f.P_next).max() < 1e-9
     # ν and S are kept where a measurement was rejected, NaN where it was absent.
+    assert np.array_equal(np.isnan(res.innovations), np.isnan(f.nu))
+    present = np.isfinite(f.nu)
+    assert np.max(np.abs(res.innovation_var[present] / f.S[present] - 1)) < 1e-9
+    assert np.max(np.abs(res.innovations - f.nu)[present] / np.sqrt(f.S[present])) < 1e-9
     assert np.all(np.isfinite(res.innovations[[200, 400], 0]))
     assert np.all(np.isnan(res.innovation_var[::7, 0]))
 
     sm = augmented_smoother(res, DISC, u, bias=bias, extra=extra)
-    xs_ref, Ps_ref = dense_augmented_smoother(x_ref, P_ref, DISC, u, bias=bias, extra=extra)
+    s = ref.reference_smoother(f, DT, PARAMS, NOISE, bias, u, extra_scale=extra.scale)
+    xs_ref, Ps_ref = s.x, s.P
     assert cov_dev(sm.P, Ps_ref).max() < 1e-9
     assert est_dev(sm.x, xs_ref, Ps_ref).max() < 1e-9
     sx = augmented_smoother(res, DISC, u, bias=bias, extra=extra, covariance=False)
@@ -273,7 +289,7 @@ def test_spikes_are_gated_flagged_and_would_otherwise_pull_the_estimate():
     assert np.array_equal(gated.P_packed, absent.P_packed)
     for i, ks in spikes.items():
         assert np.all(np.abs(gated.x[ks] - xs[ks]) < 3 * gated.sigma[ks])
-        G = measurement_row(BIASES, ("roll", "yaw")[i], 0)
+        G = ref.row(BIASES, ("roll", "yaw")[i], 0)
         err = np.abs((gated.x[ks] - xs[ks]) @ G)
         shift = np.abs((loose.x[ks] - gated.x[ks]) @ G)
         assert np.all(shift > err), (shift, err)

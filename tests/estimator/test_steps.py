@@ -7,9 +7,10 @@ the per-step bookkeeping and the closed forms together."""
 
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 
 from estimator.ekf import model as em
-from estimator.ekf.filter import ekf_filter
+from estimator.ekf.filter import EkfInputs, ekf_filter
 from estimator.kalman.filter import ExtraNoise, Measurements, kalman_filter, rts_smoother
 from estimator.linear.model import N_STATES, ProcessNoise
 from estimator.linear.steps import StepTable, discretize_many, step_intervals
@@ -33,14 +34,23 @@ def _measurements(n, rng, yaw_every=3):
                         R_ROLL, R_YAW, R_H)
 
 
+def _intervals_from_tags(t):
+    """Δt after each sample from the time tags themselves, as ``step_intervals``'s
+    docstring defines it (not by calling it): t_{k+1} − t_k, and for the last sample,
+    whose step only forms the prior after the run, the step before it."""
+    t = np.asarray(t, dtype=float)
+    return np.r_[t[1:] - t[:-1], t[-1] - t[-2]]
+
+
 def _expm_filter(meas, t, x0, P0_):
     """The paper's filter, one numpy step at a time, each step's Φ, Γ, Q_d from expm
-    and Van Loan at its own interval."""
+    and Van Loan at its own interval taken from the tags: the a-posteriori history
+    and the prior after the last step."""
     z, r = meas.z(), meas.r()
     x, P = x0.copy(), P0_.copy()
     xs, Ps = [], []
     eye = np.eye(N_STATES)
-    for k, dt in enumerate(step_intervals(t)):
+    for k, dt in enumerate(_intervals_from_tags(t)):
         for i, idx in enumerate((0, 2, 4)):
             if np.isnan(z[k, i]):
                 continue
@@ -54,23 +64,30 @@ def _expm_filter(meas, t, x0, P0_):
         Ps.append(P)
         d = expm_discretization(dt=dt)
         x, P = d.Phi @ x, d.Phi @ P @ d.Phi.T + d.Qd
-    return np.array(xs), np.array(Ps)
+    return np.array(xs), np.array(Ps), x, P
 
 
 def test_jittered_steps_with_a_gap_match_an_expm_reference(rng):
     """±50 ms jitter and a one-hour gap: the compiled per-step filter equals the
-    expm/Van Loan reference.  Tolerance: the reference's expm of a one-hour step
-    loses ~1e-10 relative (‖F‖Δt ~ 100 rad of nutation phase), which sets the
-    bound on the estimates (1e-8 of σ + |x|) and covariances (1e-8 of √(P_ii P_jj))."""
+    expm/Van Loan reference, whose intervals come from the tags (t_{k+1} − t_k after
+    sample k; the last sample's prior one step of t_N − t_{N−1} on), so a step applied
+    one sample early or late (an off-by-one in ``step_intervals``) moves the gap's
+    growth of σ to another sample and the estimates by ~σ.  Tolerance: the
+    reference's expm of a one-hour step loses ~1e-10 relative (‖F‖Δt ~ 100 rad of
+    nutation phase), which sets the bound on the estimates (1e-8 of σ + |x|) and
+    covariances (1e-8 of √(P_ii P_jj)), the prior after the run included."""
     n = 400
     t = _jittered(n, rng, gap_at=200, gap_s=3600.0)
     meas = _measurements(n, rng)
     x0 = np.zeros(N_STATES)
     result = kalman_filter(meas, StepTable.from_times(PARAMS, NOISE, t), x0, P0)
-    xs, Ps = _expm_filter(meas, t, x0, P0)
+    xs, Ps, x_next, P_next = _expm_filter(meas, t, x0, P0)
     sig = np.sqrt(np.einsum("kii->ki", Ps))
     assert np.max(np.abs(result.x - xs) / (sig + np.abs(xs))) < 1e-8
     assert np.max(cov_dev(result.P, Ps)) < 1e-8
+    sig_next = np.sqrt(np.diag(P_next))
+    assert np.max(np.abs(result.x_next - x_next) / (sig_next + np.abs(x_next))) < 1e-8
+    assert np.max(cov_dev(result.P_next, P_next)) < 1e-8
     # The gap costs what the process noise says: σ_yaw grows across it.
     assert result.sigma[200, 2] > 3 * result.sigma[199, 2]
 
@@ -153,8 +170,6 @@ def test_ekf_long_steps_are_cut_into_nominal_sub_steps(gap_steps, rng):
     """The EKF cuts a step of n × the nominal Δt into n sub-steps without measurements:
     exactly the fixed-step EKF with those samples missing (the same arithmetic; 1e-12
     of σ allows another rounding of the per-step Δt)."""
-    from estimator.ekf.filter import EkfInputs
-
     from .test_ekf import PM, WN, _prior, _twin_data
     n = 300
     _, data = _twin_data(n, rng)
@@ -169,3 +184,101 @@ def test_ekf_long_steps_are_cut_into_nominal_sub_steps(gap_steps, rng):
     full = ekf_filter(EkfInputs(zz, data.r, data.u), PM, WN, X0, Pe)
     assert np.max(np.abs(sparse.x - full.x[keep]) / full.sigma[keep]) < 1e-12
     assert np.max(np.abs(sparse.sigma / full.sigma[keep] - 1)) < 1e-12
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _a_of_q(q):
+    """A(q), scalar last (Markley & Crassidis Eq. 2.125): the frame rotation C_BR."""
+    qv, q4 = q[:3], q[3]
+    return (q4**2 - qv @ qv) * np.eye(3) + 2 * np.outer(qv, qv) - 2 * q4 * _skew(qv)
+
+
+def _r2(a):
+    """Frame rotation about y by a (docs/conventions.md)."""
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+
+
+def _inertial_propagation(X0, u, J, w0, t_out):
+    """The EKF model's physics integrated in the inertial frame N instead of the orbit
+    frame: C_BN and ω_BN by DOP853, C_RN(t) = R2(−ω0 t) (R = N at t = 0, R turning at
+    −ω0 about y_R), the gravity gradient 3ω0² n̂ × J n̂ about the nadir n̂ = C_BN
+    C_RNᵀ ẑ, wheel momentum (0, H, h) with ḣ = N_w, the torques N_x* + N_px + N_cx
+    about x and N_z* + N_pz + N_cz about z, N_p turning at the orbit rate (Eq. 9) in
+    closed form.  The state at each of ``t_out`` in the EKF's form (q_BR as C_BR,
+    ω_BR = ω_BN − C_BR (0, −ω0, 0), h, N)."""
+    H, Hdot, Nw, Nx, Nz = u
+    Jinv = np.linalg.inv(J)
+    C_BR0 = _a_of_q(X0[:4])
+    w_bn0 = X0[4:7] + C_BR0 @ np.array([0.0, -w0, 0.0])
+    npx0, npz0, ncx, ncz = X0[8:12]
+
+    def n_p(t):   # Ṅ_px = ω0 N_pz, Ṅ_pz = −ω0 N_px
+        c, s = np.cos(w0 * t), np.sin(w0 * t)
+        return npx0 * c + npz0 * s, -npx0 * s + npz0 * c
+
+    def rhs(t, y):
+        C, w, h = y[:9].reshape(3, 3), y[9:12], y[12]
+        nadir = C @ _r2(-w0 * t).T @ np.array([0.0, 0.0, 1.0])
+        npx, npz = n_p(t)
+        torque = (3 * w0**2 * np.cross(nadir, J @ nadir)
+                  + np.array([Nx + npx + ncx, 0.0, Nz + npz + ncz])
+                  - np.cross(w, J @ w + np.array([0.0, H, h])) - np.array([0.0, Hdot, Nw]))
+        return np.r_[(-_skew(w) @ C).ravel(), Jinv @ torque, Nw]
+
+    y0 = np.r_[C_BR0.ravel(), w_bn0, X0[7]]
+    atol = np.r_[np.full(9, 1e-15), np.full(3, 1e-18), 1e-15]
+    sol = solve_ivp(rhs, (0.0, t_out[-1]), y0, method="DOP853", t_eval=t_out,
+                    rtol=1e-13, atol=atol)
+    assert sol.success
+    C_BR = np.array([y[:9].reshape(3, 3) @ _r2(-w0 * t).T for t, y in zip(sol.t, sol.y.T,
+                                                                             strict=True)])
+    w_br = sol.y[9:12].T - C_BR @ np.array([0.0, -w0, 0.0])
+    npx, npz = n_p(sol.t)
+    N = np.column_stack([npx, npz, np.full_like(npx, ncx), np.full_like(npx, ncz)])
+    return C_BR, w_br, sol.y[12], N
+
+
+def test_ekf_propagates_each_sample_over_its_own_interval(rng):
+    """No measurements, so the EKF's nominal state is its propagation alone: over
+    jittered steps (±50 ms about the nominal 0.512 s, so about half are cut into two
+    sub-steps), a 37.3 s and a 600.7 s gap and, after the last sample, 1234.567 s, its
+    state at each tag (and after the run) equals the same physics integrated
+    independently to the tags' own times (``_inertial_propagation``: inertial frame,
+    DCM kinematics, DOP853 at rtol 1e-13).  A large nutation (|ω_BR| = 1e-3 rad/s,
+    ~1.6°) makes the time propagated over visible: each 0.1 ms of error there moves
+    the attitude by 1e-7 rad.  Tolerance: RK4 leaves ~(ω_n Δt)⁵/120 ≈ 2e-11 of the
+    nutation amplitude (0.027 rad) per 0.512 s sub-step, ~5e-13 rad, over ~4300
+    sub-steps ~2e-9 rad (measured 2.2e-9 rad in attitude, 8e-11 rad/s in ω_BR, the
+    same with DYNPROP_BACKEND=vm); 1e-7 rad and ω_n × that for the rates.  h and the
+    torque states RK4 integrates exactly (ḣ = N_w held, N_p turning at ω0 with
+    ω0Δt ~ 4e-5): rounding only, 1e-13 of their size measured, 1e-10 allowed.
+    Sub-steps of the nominal length in place of each interval's own (a 0.462 s step
+    taken as 0.512 s, a 0.562 s one as 2 × 0.512 s) gave 0.064 rad."""
+    from .test_ekf import PM, W0, WN, H, J
+    t = np.r_[0.0, np.cumsum(0.512 + rng.uniform(-0.05, 0.05, 399))]
+    t[150:] += 37.3 - (t[150] - t[149])
+    t[300:] += 600.7 - (t[300] - t[299])
+    after_last = 1234.567
+    n = len(t)
+    X0 = np.r_[0.02, -0.01, 0.03, 1.0, 1e-3, 2e-4, -5e-4, 0.3, 2e-5, -1e-5, 3e-6, -2e-6]
+    X0[:4] /= np.linalg.norm(X0[:4])
+    u = np.array([H, 0.0, 2e-4, 3e-6, -2e-6])
+    dt = np.r_[t[1:] - t[:-1], after_last]     # the interval after each sample
+    res = ekf_filter(EkfInputs(np.full((n, 4), np.nan), np.ones((n, 4)), np.tile(u, (n, 1))),
+                     PM, WN, X0, np.eye(11) * 1e-8, dt_s=dt, keep_nominal=True)
+    X = np.vstack([res.X, res.x_next])
+    C_ref, w_ref, h_ref, N_ref = _inertial_propagation(X0, u, J, W0,
+                                                       np.r_[t, t[-1] + after_last])
+    # The angle of the small rotation between the two C_BR, from its skew part.
+    dC = np.array([_a_of_q(x[:4]) for x in X]) @ np.swapaxes(C_ref, 1, 2)
+    angle = np.linalg.norm(np.column_stack([dC[:, 1, 2] - dC[:, 2, 1],
+                                            dC[:, 2, 0] - dC[:, 0, 2],
+                                            dC[:, 0, 1] - dC[:, 1, 0]]), axis=1) / 2
+    assert angle.max() < 1e-7, angle.max()
+    assert np.abs(X[:, 4:7] - w_ref).max() < abs(WN) * 1e-7
+    assert np.abs(X[:, 7] - h_ref).max() < 1e-10 * abs(X0[7])
+    assert np.abs(X[:, 8:] - N_ref).max() < 1e-10 * np.abs(X0[8:]).max()
