@@ -88,7 +88,9 @@ def seconds_at(at, s) -> float:
 
 def _meta(src: RunSource, frame: str, object_id: str | None) -> AemMeta:
     s = src.scenario
-    where = str(src.directory.resolve()).encode("ascii", "backslashreplace").decode()
+    # The run by its folder's name, not its path: the file is exchanged, and the user's
+    # local tree is no part of it (a long path also wrapped mid-word over COMMENT lines).
+    run_name = src.directory.resolve().name.encode("ascii", "backslashreplace").decode()
     composed = ("C(SC_BODY_1 <- EME2000) = C_BR(yaw, roll, pitch) C_RN(t) P(t): the file's "
                 "3-1-2 angles against the orbit frame R, R against dynprop's frame N (mean "
                 "of date) from the run's orbit and epoch, N precessed to EME2000 "
@@ -97,12 +99,13 @@ def _meta(src: RunSource, frame: str, object_id: str | None) -> AemMeta:
                 "C(SC_BODY_1 <- LVLH_ROTATING) = C_BR = R2(pitch) R1(roll) R3(yaw): the "
                 "file's 3-1-2 angles (docs/conventions.md)")
     notes = [f"dynprop {__version__} export of the {src.what}: {src.csv.name} (t_s, "
-             f"roll_deg, pitch_deg, yaw_deg) of the run directory {where}",
+             f"roll_deg, pitch_deg, yaw_deg) of the run directory {run_name}",
              f"{'case_scenario.yaml' if src.case else 'scenario.yaml'}: {s.name}, seed "
              f"{s.seed}, epoch_utc {s.epoch_utc}, orbit longitude "
              f"{s.orbit.longitude_deg:.10g} deg, radius {s.orbit.radius_m:.10g} m.",
              composed, "A row with an empty angle is left out: a dropout ends its segment."]
-    comments = [line for note in notes for line in textwrap.wrap(note, COMMENT_WIDTH)]
+    comments = [line for note in notes
+                for line in textwrap.wrap(note, COMMENT_WIDTH, break_on_hyphens=False)]
     return AemMeta(s.name, object_id or OBJECT_ID, FRAMES[frame], comments=tuple(comments))
 
 

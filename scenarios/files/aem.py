@@ -34,7 +34,8 @@ import numpy as np
 
 from .columns import epoch_ns
 
-INERTIAL_FRAMES = ("EME2000", "J2000", "ICRF", "GCRF")  # ICRF/GCRF: EME2000 to 1.1e-7 rad
+# ICRF/GCRF: EME2000 to the frame bias, 1.12e-7 rad; J2000 is EME2000.
+INERTIAL_FRAMES = ("EME2000", "J2000", "ICRF", "GCRF")
 ORBIT_FRAMES = ("LVLH_ROTATING", "LVLH_INERTIAL", "LVLH")
 GAP_FACTOR = 1.5
 NORM_TOLERANCE = 1e-5

@@ -6,7 +6,8 @@ The AEM's quaternions are C_{body←frame} (``aem.read_aem``, whatever the file'
 order and direction).  They are taken to dynprop's orbit frame R with the
 scenario's own orbit and epoch, the inverse of the export
 (``sim.inertial.orbit_frame_from_inertial``: C_BR = C_{B←EME2000} (C_RN(t) P(t))ᵀ)
-for EME2000, J2000, ICRF and GCRF (one frame to 1.1e-7 rad, ``aem.INERTIAL_FRAMES``);
+for EME2000, J2000, ICRF and GCRF (one frame to the frame bias, 1.12e-7 rad:
+``aem.INERTIAL_FRAMES``);
 LVLH_ROTATING is R itself, and so, for the orientation alone, are LVLH_INERTIAL and
 LVLH (Orekit: the same axes at each epoch, only taken as not rotating), the one
 difference being in rates, which dynprop does not read.  Then to the 3-1-2 angles

@@ -38,6 +38,8 @@ from sim import ephemeris
 from sim.frames import GeoOrbit, quat_from_dcm, quat_multiply
 from sim.inertial import inertial_quaternions, orbit_frame_quaternions
 
+from .test_aem import frame_bias, in_frame_bias_frame
+
 DATA = Path(__file__).resolve().parents[1] / "fixtures" / "orekit-data"
 EPOCH = datetime(2026, 3, 20, 12, tzinfo=UTC)
 META = AemMeta("GOES-NEXT", "2026-000A", interpolation_degree=7)
@@ -211,6 +213,39 @@ def test_orekit_reads_the_apm(orekit, tmp_path):
     assert (ends.getFrameA().getName(), ends.getFrameB().getName()) == ("EME2000", "SC_BODY_1")
     rotation = apm.getAttitude(FramesFactory.getEME2000(), None).getRotation()
     assert same_rotation(q_of(rotation)[None], q[None]) < READ
+
+
+def test_the_hand_written_frame_bias_is_orekits_gcrf(orekit):
+    """test_aem.frame_bias (IERS's B, written out) against Orekit's GCRF → EME2000: the
+    same IAU 2000 offsets, Orekit forming ξ0 from Δψ sin ε0 (7e-13 rad apart)."""
+    from org.orekit.frames import FramesFactory
+    rotation = FramesFactory.getGCRF().getTransformTo(FramesFactory.getEME2000(),
+                                                      start(orekit)).getRotation()
+    theirs = np.array([list(row) for row in rotation.getMatrix()])
+    assert np.abs(theirs - frame_bias()).max() < 2e-12
+    assert np.abs(theirs - np.eye(3)).max() > 5e-8       # the bias, not the identity
+
+
+@pytest.mark.parametrize("label", ["J2000", "GCRF"])
+def test_orekit_reads_the_frame_bias_frames_as_the_tests_write_them(orekit, tmp_path, label):
+    """test_export's J2000 and GCRF AEMs (``test_aem.in_frame_bias_frame``) read by Orekit
+    in EME2000 give the C_{B←EME2000} they were made from, to the printing: Orekit takes
+    J2000 as EME2000 and composes GCRF with its own bias.  ICRF (the GCRF's axes) is not
+    asked: Orekit's ICRF is the barycentre's, and the transform wants the Earth's
+    position, which the fixture's DE440 headers do not hold."""
+    from org.orekit.frames import FramesFactory
+    t = grid()[:60]
+    q = inertial_quaternions(t, *angles(t), ORBIT, EPOCH)
+    path = tmp_path / f"{label}.aem"
+    aem.write_aem(path, t, in_frame_bias_frame(q, label), META, epoch=EPOCH, cadence_s=64.0)
+    path.write_text(path.read_text().replace("REF_FRAME_A = EME2000", f"REF_FRAME_A = {label}"))
+    (segment,) = parse(orekit, path).getSegments()
+    assert segment.getMetadata().getEndpoints().getFrameA().getName() == label
+    provider, t0 = segment.getAttitudeProvider(), start(orekit)
+    theirs = np.array([q_of(provider.getAttitude(None, t0.shiftedBy(float(s)),
+                                                 FramesFactory.getEME2000()).getRotation())
+                       for s in t])
+    assert same_rotation(theirs, q) < READ
 
 
 def test_precession_matches_orekits_mod_frame(orekit):

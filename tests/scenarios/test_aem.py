@@ -18,6 +18,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation, Slerp
 
 from scenarios.files import aem
 from scenarios.files.aem import AemError, AemMeta
@@ -120,6 +121,41 @@ def test_interpolation_between_rows_follows_the_attitude(tmp_path):
     got = segment.interpolate(np.datetime64("2026-03-20T12:00:00")
                               + np.round(t * 1e9).astype("timedelta64[ns]"))
     assert same_rotation(got, run(t)) < 1e-11
+
+
+def test_interpolation_across_another_tools_sign_flip_is_the_slerp(tmp_path):
+    """Another tool's AEM need not keep q's sign from row to row (q and −q are one
+    attitude); many print QC ≥ 0, so q flips where the rotation angle crosses 180°.  The
+    attitude here turns at a constant rate about a fixed axis (a nadir pointer seen
+    from EME2000, once a sidereal day), which scipy's Slerp of the printed rows follows
+    exactly; the reader's Lagrange must give it on every interval whose 8-row window
+    holds the flip.  3e-12: the rows' printed 5e-13 through Lagrange's weights (Σ|w| < 2
+    on these central intervals) and the slerp, renormalised; Lagrange's own truncation
+    for 0.0047 rad a row is ~1e-24.  Taking the flipped rows as they are is off by ~1."""
+    axis = np.array([0.2, -0.3, 1.0]) / np.linalg.norm([0.2, -0.3, 1.0])
+    t = np.arange(0.0, 86400.0 + 1, 64.0)
+    half = np.pi / 86164.1 * t
+    path = tmp_path / "flips.aem"
+    aem.write_aem(path, t, np.column_stack([np.sin(half)[:, None] * axis, np.cos(half)]),
+                  META, epoch=EPOCH, cadence_s=64.0)
+    lines = []
+    for line in path.read_text().splitlines():
+        f = line.split()
+        if len(f) == 5 and line[:4] == "2026" and float(f[4]) < 0:
+            line = f[0] + "".join(f" {-float(x):.12f}" for x in f[1:])
+        lines.append(line)
+    path.write_text("\n".join(lines) + "\n")
+    rows = np.array([[float(x) for x in line.split()[1:]] for line in lines
+                     if line[:4] == "2026" and len(line.split()) == 5])
+    flips = np.flatnonzero(np.einsum("ij,ij->i", rows[1:], rows[:-1]) < 0)
+    assert len(flips) == 1          # at 43082 s, between rows 673 and 674
+    (segment,) = aem.read_aem(path)
+    k = flips[0]
+    at = (np.arange(k - 8, k + 9)[:, None] + [0.1, 0.5, 0.9]).ravel() * 64.0
+    got = segment.interpolate(np.datetime64("2026-03-20T12:00:00")
+                              + np.round(at * 1e9).astype("timedelta64[ns]"))
+    expected = Slerp(t, Rotation.from_quat(rows))(at).as_quat()
+    assert same_rotation(got, expected) < 3e-12
 
 
 def edit(path, old, new, count=1):
@@ -260,6 +296,32 @@ def precess_to_date(v, jd):
     alpha, delta = np.arctan2(a, b) + z, np.arcsin(c)
     return np.stack([np.cos(delta) * np.cos(alpha), np.cos(delta) * np.sin(alpha),
                      np.sin(delta)], axis=-1)
+
+
+def frame_bias():
+    """B = R1(−η0) R2(ξ0) R3(dα0): GCRS (ICRS axes: GCRF, ICRF) to the mean equator and
+    equinox of J2000 (EME2000), v_EME2000 = B v_GCRF, with the IAU 2000 offsets
+    ξ0 = −16.617, η0 = −6.8192, dα0 = −14.6 mas (IERS Conventions 2003, Ch. 5; ERFA's
+    eraBp00 builds it so).  R_i are frame rotations.  Its angle is 1.122e-7 rad; Orekit's
+    GCRF → EME2000 is this to 7e-13 (orekit_checks)."""
+    def r(axis, a):
+        c, s = np.cos(a), np.sin(a)
+        m = np.eye(3)
+        i, j = [(1, 2), (2, 0), (0, 1)][axis]
+        m[i, i] = m[j, j] = c
+        m[i, j], m[j, i] = s, -s
+        return m
+    xi0, eta0, da0 = np.deg2rad(np.array([-16.617, -6.8192, -14.6]) / 3.6e6)
+    return r(0, -eta0) @ r(1, xi0) @ r(2, da0)
+
+
+def in_frame_bias_frame(q_eme2000, label):
+    """C_{B←label} from C_{B←EME2000} (scalar last): GCRF and ICRF (the same axes, the
+    ICRS's) are C_{B←EME2000} · B; J2000 is EME2000 itself (CCSDS; Orekit maps it so).
+    Through scipy: its Rotation's matrix is Markley's A(q) transposed."""
+    if label == "J2000":
+        return np.array(q_eme2000, dtype=float)
+    return (Rotation.from_matrix(frame_bias().T) * Rotation.from_quat(q_eme2000)).as_quat()
 
 
 def test_meeus_precession_reproduces_example_21b():

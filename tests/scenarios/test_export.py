@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.interpolate import BarycentricInterpolator
+from scipy.spatial.transform import Rotation
 
 from scenarios.cli import main
 from scenarios.config.loader import load_scenario
@@ -30,7 +32,15 @@ from scenarios.files.truth_aem import read_truth_aem
 from sim.frames import GeoOrbit
 from sim.inertial import inertial_quaternions
 
-from .test_aem import angle, angles, body_axes, gmst_meeus_rad, precess_to_date
+from .test_aem import (
+    angle,
+    angles,
+    body_axes,
+    frame_bias,
+    gmst_meeus_rad,
+    in_frame_bias_frame,
+    precess_to_date,
+)
 from .test_cli_run import run_cli
 
 EPOCH = datetime(2026, 3, 20, 12, tzinfo=UTC)
@@ -131,10 +141,12 @@ def test_the_aem_holds_every_row_in_eme2000_to_the_printed_precision(run, d, wha
     assert seg.header["ORIGINATOR"] == "DYNPROP" and seg.header["CCSDS_AEM_VERS"] == "2.0"
     text = " ".join(line[8:] for line in path.read_text().splitlines()
                     if line.startswith("COMMENT "))
-    for words in (f"export of the {what}: {what}.csv", str(d.resolve()), "scalar last",
-                  "C(SC_BODY_1 <- EME2000) = C_BR(yaw, roll, pitch) C_RN(t) P(t)",
+    for words in (f"export of the {what}: {what}.csv", f"of the run directory {d.name}",
+                  "scalar last", "C(SC_BODY_1 <- EME2000) = C_BR(yaw, roll, pitch) C_RN(t) P(t)",
                   "CADENCE_S = 64"):
         assert words in text
+    # The run by its folder's name: the user's local path stays out of an exchanged file.
+    assert d.resolve().parent.name not in path.read_text()
 
 
 def test_the_truth_export_points_the_yaw_axis_at_the_independent_nadir(run, d):
@@ -260,7 +272,30 @@ def test_a_monte_carlo_case_is_exported_with_the_scenario_it_flew(run, d):
 
 # --- the APM -------------------------------------------------------------------------
 
+# 8 equispaced rows: Lagrange's weights sum to at most 6.93 (near a segment's end), so the
+# rows' printed 5e-13 makes 3.5e-12; with the APM's own 5e-13, doubled by renormalising.
+APM_READ = 1e-11
+
+
+def lagrange_of_rows(path: Path, at_s: float) -> np.ndarray:
+    """What the APM between rows is (docs/outputs.md), computed here: scipy's Lagrange
+    (``BarycentricInterpolator``) of degree 7 on the components of the AEM's 8 printed
+    rows nearest ``at_s`` (s after EPOCH) in the segment of the row before it
+    (segments split where rows are over 1.5 cadences apart), normalised."""
+    t, q = rows_of(path)
+    cut = np.r_[0, np.flatnonzero(np.diff(t) > 1.5 * 64.0) + 1, len(t)]
+    k = np.searchsorted(cut, np.searchsorted(t, at_s, "right") - 1, "right") - 1
+    t, q = t[cut[k]:cut[k + 1]], q[cut[k]:cut[k + 1]]
+    near = np.sort(np.argsort(np.abs(t - at_s))[:8])
+    out = BarycentricInterpolator(t[near] - at_s, q[near])(0.0)
+    return out / np.linalg.norm(out)
+
+
 def test_the_apm_at_a_row_is_the_row_and_between_rows_the_aems_interpolation(run, d):
+    """At a row the row's attitude; between rows the degree-7 Lagrange of the AEM's
+    rows (``lagrange_of_rows``, to ``APM_READ``).  (scipy's Slerp of the two rows
+    around is no sharper reference: the estimate's rows turn by up to 1.5e-3 rad more
+    from one step to the next, and Lagrange and slerp part by up to 3e-4 rad.)"""
     t, yaw, roll, pitch = csv_angles(run / "estimate.csv")
     rc, out, err = export(d, "--format", "apm", "--at", "3200")   # row 50
     assert rc == 0 and "at 2026-03-20T12:53:20.000000 UTC" in out, err
@@ -271,29 +306,29 @@ def test_the_apm_at_a_row_is_the_row_and_between_rows_the_aems_interpolation(run
     assert same(apm.quaternions, expected) < READ
     # Between rows, as an AEM reader interpolates the AEM of the same run.
     assert export(d, "--format", "aem")[0] == 0
-    (seg,) = aem.read_aem(d / "estimate.aem")
-    for at, when in (("2026-03-20T13:00:00.250Z", "2026-03-20T13:00:00.250"),
-                     ("2026-03-20T14:00:30+01:00", "2026-03-20T13:00:30"),
-                     ("10.5", "2026-03-20T12:00:10.500")):   # near the first row
+    for at, when, at_s in (("2026-03-20T13:00:00.250Z", "2026-03-20T13:00:00.250", 3600.25),
+                           ("2026-03-20T14:00:30+01:00", "2026-03-20T13:00:30", 3630.0),
+                           ("10.5", "2026-03-20T12:00:10.500", 10.5)):   # near the first row
         rc, out, err = export(d, "--format", "apm", "--at", at, "--out", d / "x.apm",
                               "--force")
         assert rc == 0, err
         apm = aem.read_apm(d / "x.apm")
         assert apm.epochs[0] == np.datetime64(when)
-        assert same(apm.quaternions, seg.interpolate(apm.epochs)) < 2 * READ
+        assert same(apm.quaternions, lagrange_of_rows(d / "estimate.aem", at_s)[None]) \
+            < APM_READ
 
 
 def test_the_apm_is_not_interpolated_across_a_dropout(d):
-    """Beside a dropout the APM interpolates the segment it is in, as the AEM's reader
-    does (inside the dropout there is no attitude: test_bad_input)."""
+    """Beside a dropout the APM interpolates the segment it is in (``lagrange_of_rows``
+    on that segment's rows), as the AEM's reader does (inside the dropout there is no
+    attitude: test_bad_input)."""
     blank_and_cut(d)
     assert export(d, "--format", "aem")[0] == 0
-    segments = aem.read_aem(d / "estimate.aem")
-    for at, k in ((39 * 64.0 - 20, 0), (42 * 64.0 + 20, 1), (99 * 64.0 - 1, 1),
-                  (110 * 64.0 + 1, 2)):
+    for at in (39 * 64.0 - 20, 42 * 64.0 + 20, 99 * 64.0 - 1, 110 * 64.0 + 1):
         assert export(d, "--format", "apm", "--at", at)[0] == 0
         apm = aem.read_apm(d / "estimate.apm")
-        assert same(apm.quaternions, segments[k].interpolate(apm.epochs)) < 2 * READ
+        assert same(apm.quaternions, lagrange_of_rows(d / "estimate.aem", at)[None]) \
+            < APM_READ
 
 
 # --- --truth ---------------------------------------------------------------------------
@@ -374,6 +409,40 @@ def test_read_truth_aem_interpolates_another_tools_epochs_inside_its_segments(tm
     times = np.array([0.0, 100.3, 550.0, 1100.0, 1190.0])
     got = read_truth_aem(tmp_path / "other.aem", s, times, on_grid=False)
     assert list(got.rows) == [1, 3] and got.t_s.tolist() == [100.3, 1100.0]
+
+
+@pytest.mark.parametrize("label", ["J2000", "ICRF", "GCRF"])
+def test_read_truth_aem_takes_j2000_icrf_gcrf_as_eme2000_to_the_frame_bias(tmp_path, label):
+    """One attitude written twice, C_{B←EME2000} and C_{B←label} (GCRF, ICRF: through the
+    IERS frame bias B, test_aem.frame_bias, which Orekit's GCRF confirms; J2000 is
+    EME2000), read back on the grid: the label's orbit-frame angles are the EME2000
+    file's and those written, to the frame bias dynprop leaves out (aem.INERTIAL_FRAMES).
+    The rotation between the two readings is B conjugated: its angle at most B's
+    (1.1222e-7 rad; 0 for J2000) and the printing, ≤ 2e-12 a file (2|Δq|, |Δq| ≤ 1e-12); each
+    3-1-2 angle within 1% more (their Jacobian at ≤ 5e-3 rad).  Read as the orbit frame
+    instead, the file is off by radians."""
+    s = load_scenario("goes_next_equinox")
+    t = np.arange(0.0, 86400.0, 640.0)            # on the 0.512 s grid: rows, no interpolation
+    roll, pitch, yaw = angles(t)
+    q = inertial_quaternions(t, roll, pitch, yaw, GeoOrbit(), EPOCH)
+    grid = np.arange(0.0, 86400.0, 0.512)
+    got = {}
+    for name, rows in (("EME2000", q), (label, in_frame_bias_frame(q, label))):
+        path = tmp_path / f"{name}.aem"
+        aem.write_aem(path, t, rows, AemMeta("X", "Y"), epoch=EPOCH, cadence_s=640.0)
+        edit(path, "REF_FRAME_A = EME2000", f"REF_FRAME_A = {name}")
+        got[name] = read_truth_aem(path, s, grid)
+        assert got[name].frame == name and got[name].interpolated == 0
+        assert np.array_equal(got[name].t_s, t)
+    bias = 0.0 if label == "J2000" else Rotation.from_matrix(frame_bias()).magnitude()
+    written = np.column_stack([yaw, roll, pitch])
+    assert np.abs(got["EME2000"].euler_rad - written).max() < 1e-11
+    for reference in (got["EME2000"].euler_rad, written):
+        worst = np.abs(got[label].euler_rad - reference).max()
+        assert worst <= 1.01 * bias + 1e-11, f"{worst:.3g} rad"
+    c = [matrix(*got[k].euler_rad.T) for k in (label, "EME2000")]
+    rotation = Rotation.from_matrix(c[0] @ np.swapaxes(c[1], -1, -2)).magnitude()
+    assert rotation.max() < bias + 4e-12
 
 
 def test_read_truth_aem_says_what_is_wrong_in_one_line(tmp_path, run, d):
