@@ -15,14 +15,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.optimize import minimize
+from scipy.optimize import brentq, minimize
 from scipy.signal import lfilter
+from scipy.stats import chi2
 
 from estimator.kalman.consistency import autocorrelation, whiteness
 from estimator.linear.model import N_STATES, ProcessNoise
 from estimator.linear.transition import discretize
 from estimator.tuning.likelihood import Likelihood, noise_model
-from estimator.tuning.maximum import LIMIT_DROP, maximize, nearest_allowed, profile
+from estimator.tuning.maximum import maximize, nearest_allowed, profile
 
 from .lik_helpers import DT, P0, PARAMS, measurements, simulate
 
@@ -34,6 +35,11 @@ THETA_TRUE = np.array([TRUE.q_x, TRUE.q_z, TRUE.q_w])
 THETA_START = THETA_TRUE * np.array([10.0, 0.1, 5.0])
 LOWER, UPPER = np.full(3, 1e-14), np.full(3, 1e-4)
 N = 20_000   # 2.8 h at 0.512 s: σ of ln θ ≈ 0.1–0.2 for each parameter
+# The fall of ln L at a one-sided 95% limit (docs/tune.md, "Uncertainty"): the signed
+# root of the likelihood ratio, ±√(2Δ), is N(0, 1) under the value tested, so a one-sided
+# 95% test rules the value out where √(2Δ) > z_0.95, i.e. Δ > z_0.95²/2 = χ²₁(0.90)/2
+# (1.3528), from scipy, not from the code under test.
+ONE_SIDED_95_DROP = chi2.ppf(0.90, df=1) / 2
 
 
 def central_log_gradient(lik: Likelihood, theta, h: float = 1e-3) -> np.ndarray:
@@ -170,7 +176,7 @@ def test_profile_and_limits_against_their_definitions(lik, fit):
         res = minimize(f, np.log(fit.theta[1:]), jac=jac, method="L-BFGS-B",
                        options={"ftol": 1e-12, "gtol": 1e-3})
         assert d <= -res.fun + 1e-4 and -res.fun - d <= 0.05, (d, -res.fun)
-    target = fit.best.loglik - LIMIT_DROP
+    target = fit.best.loglik - ONE_SIDED_95_DROP
     for j in range(3):
         value = 1000 * fit.theta[j]
         limit, allowed, _ = nearest_allowed(lik, fit, j, value)
@@ -185,6 +191,41 @@ def test_profile_and_limits_against_their_definitions(lik, fit):
         assert excess(np.log(limit)) >= 0 > excess(np.log(limit) + 0.7), (j, limit)
         inside = fit.theta[j] * np.exp(0.5 * fit.sigma_log[j])
         assert nearest_allowed(lik, fit, j, inside)[:2] == (inside, True)
+
+
+def test_nearest_allowed_rules_a_value_out_where_ln_L_has_fallen_by_the_95_percent_drop(
+        lik, fit):
+    """Whether ``nearest_allowed`` allows a value, against the one-sided 95% drop from
+    scipy (``ONE_SIDED_95_DROP``, χ²₁(0.90)/2): along q_x, above and below the fit (the
+    others held at it, as its slice is defined), the values where ln L has fallen by
+    0.97 and 1.03 times the drop are found by Brent's method on ``evaluate`` (to 1e-5
+    in ln θ, 1e-4 in ln L); the first must be allowed (and returned as it is), the
+    second ruled out, with an allowed limit between the fit and it.  The ±3% margin is
+    0.04 in ln L, against rounding of ~1e-9 in a ln L of 10⁵ (test_likelihood), so the
+    verdicts cannot flip by arithmetic; a drop 3% off, or χ²₁(0.90) itself (not halved),
+    or a two-sided 95% (χ²₁(0.95)/2 = 1.92), gives the wrong verdict on one of them.
+    The crossings lie 1.7–1.8σ from the fit (1.645σ for an exact quadratic), inside
+    the 1σ–3σ bracket searched."""
+    j = 0
+    lam_hat, s = np.log(fit.theta[j]), fit.sigma_log[j]
+
+    def fall(lam):
+        t = fit.theta.copy()
+        t[j] = np.exp(lam)
+        return fit.best.loglik - lik.evaluate(t).loglik
+
+    for side in (1.0, -1.0):
+        for share, allowed in ((0.97, True), (1.03, False)):
+            lam = brentq(lambda x, share=share: fall(x) - share * ONE_SIDED_95_DROP,
+                         lam_hat + side * s, lam_hat + side * 3 * s, xtol=1e-5)
+            value = float(np.exp(lam))
+            limit, ok, _ = nearest_allowed(lik, fit, j, value)
+            assert ok is allowed, (side, share, fall(lam))
+            if allowed:
+                assert limit == value
+            else:
+                assert side * (limit - fit.theta[j]) >= 0 and side * (value - limit) > 0
+                assert fall(np.log(limit)) <= ONE_SIDED_95_DROP, (side, limit)
 
 
 def test_a_bound_that_excludes_the_maximum_holds_the_fit(lik):
@@ -231,7 +272,7 @@ def test_a_noise_the_data_do_not_inform_is_not_determined():
     # passes, the crossing at 1.97e-8).
     limit, allowed, _ = nearest_allowed(lik, f, 0, 1e-5)
     assert not allowed and f.theta[0] < limit < 1e-5
-    target = f.best.loglik - LIMIT_DROP
+    target = f.best.loglik - ONE_SIDED_95_DROP
 
     def excess(lam):
         return lik.evaluate(np.r_[np.exp(lam), f.theta[1:]]).loglik - target
