@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from scenarios.files.csvio import read_csv
 
@@ -59,6 +60,31 @@ def test_bias_states_are_reported_against_the_truths(biased_run):
         assert np.all(np.isfinite(est[f"bias_{name}_deg"]))
         assert est[f"sigma_bias_{name}_deg"][-1] == pytest.approx(b[name]["sigma_deg"],
                                                                   rel=1e-9)
+
+
+def test_bias_error_over_sigma_is_the_estimate_minus_the_truth(biased_run):
+    """summary.json's ``error_over_sigma`` against (estimate − truth)/σ formed here
+    from estimate.csv's last bias and σ and the truths this run set (0.01°, 0.02°):
+    the same to 1e-8 (the CSV's ten significant digits, no cancellation: the error
+    is most of the truth).  Its sign is known besides: the bias trades against the
+    constant torque, so σ stays near its 0.01° prior and the filter barely leaves
+    the prior's zero.  A scalar Gaussian update that shrinks the prior's σ₀
+    (scenario.yaml) to σ leaves the mean (σ/σ₀)² of the way from the data's
+    estimate to the prior's zero: error ≈ −(σ/σ₀)² · truth, i.e.
+    e/σ ≈ −σ · truth/σ₀², with a spread of √(1 − σ²/σ₀²) in e/σ from the data's
+    own noise; held within 3 of those (measured −0.91 and −1.91 against −0.95 and
+    −1.95; (truth − estimate)/σ is +0.91 and +1.91)."""
+    b = _summary(biased_run)["bias_states"]
+    est = read_csv(biased_run / "estimate.csv")
+    priors = yaml.safe_load((biased_run / "scenario.yaml").read_text())[
+        "estimator"]["bias_states"]
+    for name, truth in (("earth_roll", 0.01), ("dss_yaw", 0.02)):
+        sigma0 = priors[name]["sigma_deg"]   # the prior's 1σ about its zero estimate
+        value, sigma = est[f"bias_{name}_deg"][-1], est[f"sigma_bias_{name}_deg"][-1]
+        z = b[name]["error_over_sigma"]
+        assert z == pytest.approx((value - truth) / sigma, rel=1e-8), name
+        expected, spread = -sigma * truth / sigma0**2, np.sqrt(1 - (sigma / sigma0) ** 2)
+        assert abs(z - expected) < 3 * spread, (name, z, expected, spread)
 
 
 def test_estimate_on_the_runs_telemetry_reproduces_its_biases(biased_run, tmp_path):
@@ -124,5 +150,9 @@ def test_a_monte_carlo_case_judges_the_augmented_state_against_its_truth():
     assert kept["nees_mean_augmented"] == pytest.approx(full["nees_mean_augmented"],
                                                         rel=1e-9)
     for name in ("earth_roll", "dss_yaw"):
-        assert kept["bias_states"][name]["truth_deg"] is not None
-        assert abs(kept["bias_states"][name]["error_over_sigma"]) < 3
+        entry = kept["bias_states"][name]
+        assert entry["truth_deg"] is not None
+        assert abs(entry["error_over_sigma"]) < 3
+        # Signed as the run's is: (estimate − truth)/σ, from the case's own figures.
+        assert entry["error_over_sigma"] == pytest.approx(
+            (entry["estimate_deg"] - entry["truth_deg"]) / entry["sigma_deg"], rel=1e-12)

@@ -6,10 +6,12 @@ with --verify, and bad batches."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from scenarios.config.loader import load_scenario
 from scenarios.files.columns import telemetry_columns
@@ -150,3 +152,34 @@ def test_every_trim_json_key_is_documented(mistrimmed):
     _, d, _ = mistrimmed
     assert d["verify"] is not None
     assert not undocumented(sorted(json_keys(d)), _spans())
+
+
+@pytest.mark.surface
+def test_the_trim_page_shows_each_number_with_its_documented_unit(mistrimmed, tmp_path):
+    """`dynprop report` on the trim directory: every number that names trim.json is
+    the file's (test_report.check_numbers), and each row of a key, its value and its
+    unit shows the unit docs/outputs.md gives the key's innermost documented name:
+    the tab effectiveness, the scenario's own 2.5e-6, in N m/° (a suffix rule taken
+    after ``_deg`` showed it in °), κ̂ and the torques in N m, the tab in °."""
+    from .test_report import check_numbers
+    from .test_report_units import UNIT_NOT_IN_NAME, documented_units, innermost_name, shown_units
+    out, d, _ = mistrimmed
+    # A copy (trim/ and the run's scenario.yaml above it): the other tests read trim/.
+    page = tmp_path / "trim"
+    shutil.copytree(out / "trim", page)
+    shutil.copy(out / "scenario.yaml", tmp_path)
+    rc, _, err = run_cli("report", str(page))
+    assert rc == 0, err
+    assert check_numbers(page / "report.html") > 20
+    shown = shown_units(page / "report.html")
+    key = "recommendation.tab_effectiveness_Nm_per_deg"
+    scenario = yaml.safe_load((out / "scenario.yaml").read_text())
+    assert d["recommendation"]["tab_effectiveness_Nm_per_deg"] == \
+        scenario["environment"]["solar"]["tab_effectiveness_Nm_per_deg"]
+    assert shown[key] == "N m/°"
+    documented = documented_units()
+    checked = {k: (unit, documented[innermost_name(k)]) for k, unit in shown.items()
+               if innermost_name(k) in documented and innermost_name(k) not in UNIT_NOT_IN_NAME}
+    assert {key, "recommendation.sigma_deg", "recommendation.residual_after_Nm",
+            "out_of_phase.amplitude_Nm", "truth.kappa_Nm"} <= set(checked)
+    assert {k: v for k, v in checked.items() if v[0] != v[1]} == {}
