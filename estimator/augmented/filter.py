@@ -18,8 +18,8 @@ and h the augmented model has rank 9 of 10 per such bias (likewise yaw, N_cz and
 bias), and a constant bias is known only as well as the prior on the constant torque
 allows; a second head without a bias state, seen as well, makes a yaw bias observable.
 The steps are compiled
-(``augmented.steps``); ``dense_augmented_filter`` and ``dense_augmented_smoother``
-are plain-numpy references for the tests.
+(``augmented.steps``); the tests hold them to a plain-numpy filter and smoother of
+their own (tests/estimator/dense_reference.py).
 """
 
 from __future__ import annotations
@@ -294,22 +294,6 @@ def augmented_smoother(result: AugmentedResult, disc, u=None, *, bias: BiasModel
                                    names)
 
 
-def augmented_matrices(disc, bias: BiasModel | None, Qd_unit=None):
-    """Φ_a, Γ_a, Q_d,a and Q_e,a as dense arrays (Eqs. 31–32 with the bias block)."""
-    names = _names(bias)
-    nb, n = len(names), N_STATES + len(names)
-    Phi, Gam, Qd, Qe = (np.zeros((n, n)), np.zeros((n, N_STATES)), np.zeros((n, n)),
-                        np.zeros((n, n)))
-    Phi[:N_STATES, :N_STATES], Phi[N_STATES:, N_STATES:] = disc.Phi, np.eye(nb)
-    Gam[:N_STATES] = disc.Gamma
-    Qd[:N_STATES, :N_STATES] = disc.Qd
-    if nb:
-        Qd[N_STATES:, N_STATES:] = np.diag(np.asarray(bias.walk_rad2ps) * disc.dt)
-    if Qd_unit is not None:
-        Qe[:N_STATES, :N_STATES] = Qd_unit
-    return Phi, Gam, Qd, Qe
-
-
 def measurement_row(bias: BiasModel | None, kind: str, head: int | None = None
                     ) -> np.ndarray:
     """G row of one measurement ('roll', 'yaw' from ``head``, 'h') on the augmented
@@ -324,59 +308,3 @@ def augmented_model(p: ModelParams, bias: BiasModel | None) -> np.ndarray:
     """F_a = blockdiag(F (Eq. 11b), 0): the biases are constant between noise, for
     ``estimator.analysis.observability`` with rows from ``measurement_row``."""
     return augmented_dynamics(dynamics_matrix(p), len(_names(bias)))
-
-
-def dense_augmented_filter(meas: Measurements, disc, x0, P0, u=None, *,
-                           bias: BiasModel | None, sun_head=None,
-                           gate_chi2: float | None = None, extra: ExtraNoise | None = None
-                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Reference in plain numpy, one loop iteration per step (slow; for tests): the
-    a-posteriori x (N, n), P (N, n, n) and rejected (N, 3)."""
-    z, r = meas.z(), meas.r()
-    n_steps = len(z)
-    u = _inputs(u, n_steps)
-    scale, Qd_unit = _extra(extra, n_steps)
-    Phi, Gam, Qd, Qe = augmented_matrices(disc, bias, Qd_unit)
-    x, P = (a.copy() for a in _prior(x0, P0, bias))
-    head = np.full(n_steps, np.nan) if sun_head is None else np.asarray(sun_head, float)
-    head_selector(sun_head, np.isfinite(z[:, 1]), bias)       # the same checks
-    n = len(x)
-    xs, Ps, rej = np.empty((n_steps, n)), np.empty((n_steps, n, n)), np.zeros((n_steps, 3),
-                                                                                bool)
-    eye = np.eye(n)
-    for k in range(n_steps):
-        for i, kind in enumerate(("roll", "yaw", "h")):
-            if np.isnan(z[k, i]):
-                continue
-            hd = int(head[k]) if kind == "yaw" and np.isfinite(head[k]) else None
-            G = measurement_row(bias, kind, hd)[None, :]
-            S = (G @ P @ G.T).item() + r[k, i]
-            nu = z[k, i] - (G @ x).item()
-            if gate_chi2 is not None and nu * nu > gate_chi2 * S:
-                rej[k, i] = True
-                continue
-            K = P @ G.T / S
-            x = x + K[:, 0] * nu
-            IKG = eye - K @ G
-            P = IKG @ P @ IKG.T + r[k, i] * K @ K.T
-        xs[k], Ps[k] = x, P
-        x = Phi @ x + Gam @ u[k]
-        P = Phi @ P @ Phi.T + Qd + scale[k] * Qe
-    return xs, Ps, rej
-
-
-def dense_augmented_smoother(xs, Ps, disc, u=None, *, bias: BiasModel | None,
-                             extra: ExtraNoise | None = None
-                             ) -> tuple[np.ndarray, np.ndarray]:
-    """Reference RTS smoother in plain numpy over the filter's posteriors (for tests)."""
-    n_steps = len(xs)
-    u = _inputs(u, n_steps)
-    scale, Qd_unit = _extra(extra, n_steps)
-    Phi, Gam, Qd, Qe = augmented_matrices(disc, bias, Qd_unit)
-    x_s, P_s = xs.copy(), Ps.copy()
-    for k in range(n_steps - 2, -1, -1):
-        P_pred = Phi @ Ps[k] @ Phi.T + Qd + scale[k] * Qe
-        C = np.linalg.solve(P_pred, Phi @ Ps[k]).T
-        x_s[k] = xs[k] + C @ (x_s[k + 1] - Phi @ xs[k] - Gam @ u[k])
-        P_s[k] = Ps[k] + C @ (P_s[k + 1] - P_pred) @ C.T
-    return x_s, P_s
