@@ -375,7 +375,7 @@ def main() -> None:
     report("simulate_2day_wall_s", cli_wall_s("simulate", "goes_next_equinox"), "s")
 
     # Issue 4: the filter over one day, roll and h every step, yaw two thirds of it.
-    from dynprop.estimator.kalman.filter import Measurements, dense_filter, kalman_filter
+    from dynprop.estimator.kalman.filter import kalman_filter
     from dynprop.estimator.linear.transition import discretize
     params, noise, meas, x0, P0, rng = _filter_day()
     disc = discretize(params, noise, 0.512)
@@ -416,11 +416,14 @@ def main() -> None:
     for key, value, unit in export_figures(year):
         report(key, value, unit)
     year_dir.cleanup()
-    k = 5000  # the plain-numpy loop, for comparison, scaled to a day
-    part = Measurements(meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k], 3.3e-8, 4e-7,
-                        1.5e-7)
+    # The plain-numpy loop, for comparison, scaled to a day: the tests' textbook
+    # reference (tests/estimator/dense_reference.py), one Python iteration per step.
+    from tests.estimator.dense_reference import kalman_reference
+    k = 5000
+    z = np.column_stack([meas.roll_rad[:k], meas.yaw_rad[:k], meas.h_Nms[:k]])
     report("filter_numpy_loop_s_per_day",
-           median_time(lambda: dense_filter(part, disc, x0, P0), repeats=3) * n / k, "s")
+           median_time(lambda: kalman_reference(z, (3.3e-8, 4e-7, 1.5e-7), disc, x0, P0),
+                       repeats=3) * n / k, "s")
 
     # Issue 6: the whole linearization report of the default scenario (22 two-day runs
     # and 20 truth-only runs through the one compiled step, five figures).

@@ -11,8 +11,8 @@ scalar updates and G a unit row it costs little.
 
 The step is one CasADi function (``kalman.steps``) rolled out by ``rollout``
 (compiled once, Φ, Γ and Q_d entering as parameters), so a day of 0.512 s data
-takes a fraction of a second; ``dense_filter`` is a plain-numpy reference used by
-the tests.
+takes a fraction of a second; the tests hold it to a plain-numpy filter of their
+own (tests/estimator/dense_reference.py).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 
 from ..linear.model import N_STATES
 from ..linear.steps import StepTable, roll_blocks
-from .steps import _IU, MEAS_STATES, N_UT, PHI_PATTERN, _engine, pack, pack_params, unpack
+from .steps import _IU, N_UT, PHI_PATTERN, _engine, pack, pack_params, unpack
 
 
 @dataclass(frozen=True)
@@ -271,36 +271,3 @@ def _filter_per_step(table: StepTable, backend: str, chunk: int, s0, inputs, pre
     nu[~present] = np.nan
     S[~present] = np.nan
     return FilterResult(x, P, nu, S, last[:N_STATES], unpack(last[N_STATES:]), engine.backend)
-
-
-def dense_filter(meas: Measurements, disc, x0, P0, u=None, extra: ExtraNoise | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Reference implementation in plain numpy, one Python loop iteration per step
-    (slow; for tests).  Returns the a-posteriori x (N, 9) and P (N, 9, 9)."""
-    z, r = meas.z(), meas.r()
-    n = len(z)
-    u = _inputs(u, n)
-    scale, Qd_unit = _extra(extra, n)
-    table = disc if isinstance(disc, StepTable) else None
-    if table is None:
-        Phi, Gam, Qd = (np.asarray(m, dtype=float) for m in (disc.Phi, disc.Gamma, disc.Qd))
-    x, P = np.asarray(x0, dtype=float).copy(), np.asarray(P0, dtype=float).copy()
-    xs, Ps = np.empty((n, N_STATES)), np.empty((n, N_STATES, N_STATES))
-    eye = np.eye(N_STATES)
-    for k in range(n):
-        for i, idx in enumerate(MEAS_STATES):
-            if np.isnan(z[k, i]):
-                continue
-            G = eye[idx:idx + 1]
-            S = (G @ P @ G.T).item() + r[k, i]
-            K = P @ G.T / S
-            x = x + (K * (z[k, i] - x[idx])).ravel()
-            IKG = eye - K @ G
-            P = IKG @ P @ IKG.T + r[k, i] * K @ K.T
-        xs[k], Ps[k] = x, P
-        if table is not None:
-            d = table.block_of(table.index[k:k + 1])
-            Phi, Gam, Qd, Qd_unit = d.Phi[0], d.Gamma[0], d.Qd[0], d.Qd_unit[0]
-        x = Phi @ x + Gam @ u[k]
-        P = Phi @ P @ Phi.T + Qd + scale[k] * Qd_unit
-    return xs, Ps

@@ -34,7 +34,7 @@ import numpy as np
 from dynprop.rollout.chunks import ChunkedRollout
 
 from ..kalman.filter import Measurements, _inputs
-from ..kalman.steps import MEAS_STATES, N_UT, pack
+from ..kalman.steps import N_UT, pack
 from ..linear.model import N_STATES, ModelParams, ProcessNoise
 from ..linear.transition import process_noise_integral
 from .steps import N_ACC, N_BASE, likelihood_step, n_fisher, score_step, score_step_ad
@@ -232,31 +232,5 @@ class Likelihood:
         return nu, S
 
 
-def dense_loglik(meas: Measurements, Phi, Gamma, Qd, x0, P0, u=None,
-                 extra_Qd: np.ndarray | None = None) -> float:
-    """ln L of the filter in plain numpy, one Python iteration per step, with the
-    textbook (non-Joseph) update and ``extra_Qd`` (N, 9, 9) added per step: the
-    independent reference the tests hold the compiled passes to."""
-    z, r = meas.z(), meas.r()
-    n = len(z)
-    u = _inputs(u, n)
-    x, P = np.array(x0, dtype=float), np.array(P0, dtype=float)
-    total = 0.0
-    for k in range(n):
-        for i, idx in enumerate(MEAS_STATES):
-            if np.isnan(z[k, i]):
-                continue
-            S = P[idx, idx] + r[k, i]
-            nu = z[k, i] - x[idx]
-            total += np.log(2 * np.pi * S) + nu * nu / S
-            K = P[:, idx] / S
-            x = x + K * nu
-            P = P - np.outer(K, P[idx])
-            P = 0.5 * (P + P.T)
-        x = Phi @ x + Gamma @ u[k]
-        P = Phi @ P @ Phi.T + Qd + (0.0 if extra_Qd is None else extra_Qd[k])
-    return -0.5 * total
-
-
-__all__ = ["Evaluation", "Likelihood", "NoiseModel", "dense_loglik", "likelihood_step",
+__all__ = ["Evaluation", "Likelihood", "NoiseModel", "likelihood_step",
            "noise_model", "score_step", "score_step_ad"]

@@ -1,7 +1,9 @@
-"""A reference Kalman filter and RTS smoother for the state with sensor-bias states
-(``estimator.augmented``), written from the textbook in plain numpy and sharing none
-of the package's augmentation: its own prior, its own augmented F, Q and their
-discretisation, its own measurement rows.
+"""Reference filters written from the textbook in plain numpy, for the tests to hold
+the compiled ones to, sharing none of their code: the Kalman filter on the paper's
+nine states (``kalman_reference``, given the test's own Φ, Γ, Q_d), its likelihood
+(``reference_loglik``), and the filter and RTS smoother on the state with sensor-bias
+states (``estimator.augmented``: ``reference_filter``, ``reference_smoother``) with
+its own prior, augmented F, Q and their discretisation, its own measurement rows.
 
 From the package it takes only inputs: the paper's F (``model.dynamics_matrix``,
 Eq. 11b), the noise intensities (``ProcessNoise``'s numbers) and the bias model's
@@ -31,7 +33,8 @@ from types import SimpleNamespace
 import numpy as np
 import scipy.linalg as sl
 
-from estimator.linear.model import ProcessNoise, dynamics_matrix
+# The installed name, not the tests' short alias: benchmarks/run.py imports this module too.
+from dynprop.estimator.linear.model import ProcessNoise, dynamics_matrix
 
 N9 = 9
 ROLL_STATE, YAW_STATE, H_STATE = 0, 2, 4        # r, y, h in Eq. 10's order
@@ -115,30 +118,29 @@ def _scale(extra_scale, n_steps):
     return np.zeros(n_steps) if extra_scale is None else np.asarray(extra_scale, float)
 
 
-def reference_filter(z, r, dt, p, q, bias, x0, P0, u=None, sun_head=None, gate=None,
-                     extra_scale=None) -> SimpleNamespace:
-    """z (N, 3): roll, yaw, h (NaN where absent); r: their variances ((3,) or (N, 3));
-    x0, P0 the paper's nine; u (N, 9) the inputs ū of Eq. 12a; ``extra_scale`` (N,)
-    the q_w added on each step.  The a-posteriori x, P, the innovations ν and their
-    variances S (NaN where absent), ``rejected`` (N, 3) by the gate γ, and the prior
-    after the last step (x_next, P_next)."""
+def filter_loop(z, r, d, x, P, rows, u=None, extra_scale=None, gate=None) -> SimpleNamespace:
+    """The textbook filter, one numpy step at a time: for each sample the scalar
+    Joseph updates (Eqs. 36-38) in the order roll, yaw, h, a present measurement whose
+    ν²/S exceeds ``gate`` left out; then x⁻ = Φx⁺ + Γū, P⁻ = ΦP⁺Φᵀ + Q_d (+ scale_k
+    Q_e).  ``d``: Φ, Γ, Q_d (and Q_e with ``extra_scale``); ``rows(k, i)``: the
+    measurement row of kind i (0 roll, 1 yaw, 2 h) at sample k.  The a-posteriori x,
+    P, the innovations ν and their variances S (NaN where absent), ``rejected`` (N, 3)
+    and the prior after the last step (x_next, P_next)."""
     z = np.asarray(z, dtype=float)
     n_steps = len(z)
     r = np.broadcast_to(np.asarray(r, dtype=float), z.shape)
     u, scale = _inputs(u, n_steps), _scale(extra_scale, n_steps)
-    d = discretization(p, q, bias, dt)
-    x, P = prior(x0, P0, bias)
+    x, P = np.array(x, dtype=float), np.array(P, dtype=float)
     n = len(x)
     out = SimpleNamespace(x=np.empty((n_steps, n)), P=np.empty((n_steps, n, n)),
                           nu=np.full((n_steps, 3), np.nan), S=np.full((n_steps, 3), np.nan),
                           rejected=np.zeros((n_steps, 3), bool))
     eye = np.eye(n)
     for k in range(n_steps):
-        for i, kind in enumerate(("roll", "yaw", "h")):
+        for i in range(3):
             if np.isnan(z[k, i]):
                 continue
-            head = int(sun_head[k]) if kind == "yaw" and sun_head is not None else None
-            g = row(bias, kind, head)
+            g = rows(k, i)
             S = g @ P @ g + r[k, i]
             nu = z[k, i] - g @ x
             out.nu[k, i], out.S[k, i] = nu, S
@@ -151,9 +153,58 @@ def reference_filter(z, r, dt, p, q, bias, x0, P0, u=None, sun_head=None, gate=N
             P = IKG @ P @ IKG.T + r[k, i] * np.outer(K, K)
         out.x[k], out.P[k] = x, P
         x = d.Phi @ x + d.Gamma @ u[k]
-        P = d.Phi @ P @ d.Phi.T + d.Qd + scale[k] * d.Qe
+        P = d.Phi @ P @ d.Phi.T + d.Qd + (scale[k] * d.Qe if scale[k] else 0.0)
     out.x_next, out.P_next = x, P
     return out
+
+
+def reference_filter(z, r, dt, p, q, bias, x0, P0, u=None, sun_head=None, gate=None,
+                     extra_scale=None) -> SimpleNamespace:
+    """``filter_loop`` on the augmented model: its own prior, discretisation and rows.
+    z (N, 3): roll, yaw, h (NaN where absent); r: their variances ((3,) or (N, 3));
+    x0, P0 the paper's nine; u (N, 9) the inputs ū of Eq. 12a; ``sun_head`` (N,) the
+    head of each yaw sample; ``extra_scale`` (N,) the q_w added on each step."""
+    kinds = ("roll", "yaw", "h")
+
+    def rows(k, i):
+        head = int(sun_head[k]) if i == 1 and sun_head is not None else None
+        return row(bias, kinds[i], head)
+
+    return filter_loop(z, r, discretization(p, q, bias, dt), *prior(x0, P0, bias), rows,
+                       u, extra_scale, gate)
+
+
+def kalman_reference(z, r, d, x0, P0, u=None, extra_scale=None) -> SimpleNamespace:
+    """``filter_loop`` on the paper's nine states with the discretisation ``d`` given
+    (Φ, Γ, Q_d and Q_e: the test's own expm and Van Loan)."""
+    return filter_loop(z, r, d, x0, P0, lambda k, i: row(None, ("roll", "yaw", "h")[i]), u,
+                       extra_scale)
+
+
+def reference_loglik(z, r, Phi, Gamma, Qd, x0, P0, u=None, extra_Qd=None) -> float:
+    """ln L = −½ Σ (ln 2πS + ν²/S) over every scalar update of the filter in plain
+    numpy, with the textbook (non-Joseph) update P − K Pᵢ, symmetrised, and
+    ``extra_Qd`` (N, 9, 9) added per step."""
+    z = np.asarray(z, dtype=float)
+    n_steps = len(z)
+    r = np.broadcast_to(np.asarray(r, dtype=float), z.shape)
+    u = _inputs(u, n_steps)
+    x, P = np.array(x0, dtype=float), np.array(P0, dtype=float)
+    total = 0.0
+    for k in range(n_steps):
+        for i, idx in enumerate((ROLL_STATE, YAW_STATE, H_STATE)):
+            if np.isnan(z[k, i]):
+                continue
+            S = P[idx, idx] + r[k, i]
+            nu = z[k, i] - x[idx]
+            total += np.log(2 * np.pi * S) + nu * nu / S
+            K = P[:, idx] / S
+            x = x + K * nu
+            P = P - np.outer(K, P[idx])
+            P = 0.5 * (P + P.T)
+        x = Phi @ x + Gamma @ u[k]
+        P = Phi @ P @ Phi.T + Qd + (0.0 if extra_Qd is None else extra_Qd[k])
+    return -0.5 * total
 
 
 def reference_smoother(filtered, dt, p, q, bias, u=None, extra_scale=None

@@ -20,7 +20,6 @@ from estimator.kalman.filter import (
     ExtraNoise,
     FilterResult,
     Measurements,
-    dense_filter,
     kalman_filter,
     pack,
     rts_smoother,
@@ -38,6 +37,7 @@ from estimator.linear.model import (
 )
 
 from .cov_helpers import cov_dev
+from .dense_reference import kalman_reference
 
 DT = 0.512
 # GOES-Next numbers from the paper (Section 2, Eq. 1), typed here independently.
@@ -101,8 +101,9 @@ def est_dev(x, x_ref, P_ref) -> np.ndarray:
 def test_compiled_filter_matches_dense_numpy_reference(rng):
     """With process noise, missing yaw and inputs: the compiled filter equals a
     plain-numpy filter (the same sequential Joseph algorithm, other rounding) element by
-    element.  This checks the transcription, not the algorithm: the DARE test below is
-    the independent check with process noise."""
+    element (``dense_reference.kalman_reference``, written in the tests from the
+    textbook).  This checks the transcription, not the algorithm: the DARE test below
+    is the independent check with process noise."""
     n = 3000
     u = input_vector(PARAMS, 1e-6 * np.sin(np.arange(n) / 500), -2e-6, 1e-5)
     xs, z = simulate_linear(n, 1, rng, u=u, yaw_hours=0.2)
@@ -110,7 +111,8 @@ def test_compiled_filter_matches_dense_numpy_reference(rng):
     z[::7, 0] = np.nan  # some roll and h gaps too
     z[::11, 2] = np.nan
     res = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, u=u)
-    x_ref, P_ref = dense_filter(meas(z), DISC, np.zeros(N_STATES), P0, u=u)
+    ref = kalman_reference(z, (R_ROLL, R_YAW, R_H), DISC, np.zeros(N_STATES), P0, u=u)
+    x_ref, P_ref = ref.x, ref.P
     # Rounding differences, amplified where an update cancels most of P (P0/R up to ~700
     # in the first steps) and carried over the filter's memory: measured 1.3e-14 in P and
     # 350 eps of σ + |x| in x (the same with DYNPROP_BACKEND=vm); 1e-11 for both.
@@ -377,7 +379,9 @@ def test_extra_noise_on_chosen_steps_matches_the_dense_references(rng):
     scale[399:700] = 3e-9                        # the steps that bridge it
     extra = ExtraNoise(scale, unit)
     res = kalman_filter(meas(z), DISC, np.zeros(N_STATES), P0, extra=extra)
-    x_ref, P_ref = dense_filter(meas(z), DISC, np.zeros(N_STATES), P0, extra=extra)
+    ref = kalman_reference(z, (R_ROLL, R_YAW, R_H), SimpleNamespace(**vars(DISC), Qe=unit),
+                           np.zeros(N_STATES), P0, extra_scale=scale)
+    x_ref, P_ref = ref.x, ref.P
     # As the dense comparison above: the same algorithm, other rounding.
     assert cov_dev(res.P, P_ref).max() < 1e-9
     assert est_dev(res.x, x_ref, P_ref).max() < 1e-9

@@ -3,12 +3,13 @@
 
 References:
 
-- ln L of the compiled pass against ``dense_loglik``, a plain-numpy filter with the
-  textbook update, given Q_d from the closed form at the whole ``ProcessNoise`` θ
-  sets (not from ``NoiseModel``'s Σ θ_j U_j), the roll factor as a scaled roll
-  variance and the bridged dropout's noise as ``extra_Qd`` = max(e − q_w, 0)·Q_d(q_w=1)
-  written out here; and ``dense_loglik`` itself against the joint Gaussian density of
-  every measurement at once (no recursion at all) on a short record.
+- ln L of the compiled pass against ``dense_reference.reference_loglik``, a
+  plain-numpy filter in the tests with the textbook update, given Q_d from the closed
+  form at the whole ``ProcessNoise`` θ sets (not from ``NoiseModel``'s Σ θ_j U_j),
+  the roll factor as a scaled roll variance and the bridged dropout's noise as
+  ``extra_Qd`` = max(e − q_w, 0)·Q_d(q_w=1) written out here; and
+  ``reference_loglik`` itself against the joint Gaussian density of every
+  measurement at once (no recursion at all) on a short record.
 - ν and S of ``Likelihood.innovations`` against the production filter
   (``kalman.kalman_filter`` with ``ExtraNoise``).
 - The hand-derived score and Fisher information against CasADi's forward-mode AD of
@@ -29,8 +30,9 @@ import pytest
 from estimator.kalman.filter import ExtraNoise, Measurements, kalman_filter
 from estimator.linear.model import N_STATES, ProcessNoise, input_vector
 from estimator.linear.transition import discretize
-from estimator.tuning.likelihood import Likelihood, dense_loglik, noise_model
+from estimator.tuning.likelihood import Likelihood, noise_model
 
+from .dense_reference import reference_loglik
 from .lik_helpers import (
     DT,
     P0,
@@ -115,6 +117,16 @@ def reference(record, groups, roll, theta) -> tuple[Measurements, np.ndarray, np
     return meas, discretize(PARAMS, q, DT).Qd, extra
 
 
+def _z_and_r(meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
+    """The measurements (N, 3) and their variances (N, 3) from the fields themselves,
+    for the reference (not through ``Measurements``' own stacking)."""
+    n = len(meas.roll_rad)
+    z = np.column_stack([meas.roll_rad, meas.yaw_rad, meas.h_Nms])
+    r = np.column_stack([np.broadcast_to(np.asarray(v, dtype=float), (n,))
+                         for v in (meas.var_roll, meas.var_yaw, meas.var_h)])
+    return z, r
+
+
 def terms_scale(S: np.ndarray, nu: np.ndarray) -> float:
     """Σ |½ (ln 2πS + ν²/S)| over the updates: the size of what ln L sums."""
     ok = np.isfinite(nu)
@@ -143,8 +155,8 @@ def test_compiled_loglik_equals_dense_numpy_reference(record, case):
         ev = lik.evaluate(theta)
         meas, Qd, extra = reference(record, groups, roll, theta)
         disc = discretize(PARAMS, FIXED, DT)
-        ref = dense_loglik(meas, disc.Phi, disc.Gamma, Qd, record["x0"], P0, u=record["u"],
-                           extra_Qd=extra)
+        ref = reference_loglik(*_z_and_r(meas), disc.Phi, disc.Gamma, Qd, record["x0"], P0,
+                               u=record["u"], extra_Qd=extra)
         nu, S = lik.innovations(theta)
         scale = terms_scale(S, nu)
         assert abs(ev.loglik - ref) <= 1e-11 * scale, (case, theta, ev.loglik, ref)
@@ -162,7 +174,7 @@ def test_compiled_loglik_equals_dense_numpy_reference(record, case):
 
 
 def test_dense_reference_equals_the_joint_gaussian_density(record):
-    """``dense_loglik`` against the likelihood written without any recursion: the
+    """``reference_loglik`` against the likelihood written without any recursion: the
     measurements of the first 60 samples are jointly Gaussian, z = G X + v, with the
     states' mean μ_{k+1} = Φ μ_k + Γ u_k and covariance Cov(x_{k+1}, x_j) =
     Φ Cov(x_k, x_j), Var(x_{k+1}) = Φ Var(x_k) Φᵀ + Q_d + extra_k; ln L = ln N(z; Gμ,
@@ -187,7 +199,8 @@ def test_dense_reference_equals_the_joint_gaussian_density(record):
     extra = np.maximum(e - q.q_w, 0.0)[:, None, None] * unit_wheel_Qd()
     assert np.any(extra[:, 4, 4] > 0)
     x0 = record["x0"]
-    ref = dense_loglik(meas, disc.Phi, disc.Gamma, disc.Qd, x0, P0, u=u, extra_Qd=extra)
+    ref = reference_loglik(*_z_and_r(meas), disc.Phi, disc.Gamma, disc.Qd, x0, P0, u=u,
+                           extra_Qd=extra)
 
     mu = np.empty((n, N_STATES))
     C = np.zeros((n, n, N_STATES, N_STATES))   # C[k, j] = Cov(x_k, x_j)
