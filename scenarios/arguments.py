@@ -41,6 +41,23 @@ def _scenario_command(sub, name: str, help: str, out: str | None = None,
     return p
 
 
+def _source_command(sub, name: str, help: str) -> argparse.ArgumentParser:
+    """A command that reads telemetry (`tune`, `batch`): a run directory or a file with
+    ``--scenario``, ``--set``, and ``--out`` defaulting to RUN_DIR/<name>."""
+    p = sub.add_parser(name, help=help)
+    p.add_argument("source", type=Path, metavar="RUN_DIR|TELEMETRY.csv",
+                   help="a `dynprop run` or `estimate` directory, or a telemetry file "
+                   "(with --scenario)")
+    p.add_argument("--scenario", help="scenario (default: the run directory's "
+                   "scenario.yaml)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a scenario key (repeatable); VALUE is YAML")
+    _out_args(p, f"output directory (default: RUN_DIR/{name}, or {name}/ beside the file)",
+              required=False, force=f"replace a non-empty --out (RUN_DIR/{name} is replaced "
+              "anyway)")
+    return p
+
+
 def _whole(text: str, minimum: int) -> int:
     try:
         value = int(text)
@@ -178,16 +195,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="telemetry CSV (default: RUN_DIR/telemetry.csv)")
     trim.add_argument("--verify", action="store_true", help="fly the recommended tab over the "
                       "same span (RUN_DIR/trim/verify/) and compare before and after")
-    tune = sub.add_parser("tune", help="the filter's noise from its own telemetry by maximum "
-                          "likelihood, no truth: tune.json, tune.md, tuned_noise.yaml, "
-                          "tune.png (RUN_DIR/tune/)")
-    tune.add_argument("source", type=Path, metavar="RUN_DIR|TELEMETRY.csv",
-                      help="a `dynprop run` or `estimate` directory, or a telemetry file "
-                      "(with --scenario)")
-    tune.add_argument("--scenario", help="scenario (default: the run directory's "
-                      "scenario.yaml)")
-    tune.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
-                      help="override a scenario key (repeatable); VALUE is YAML")
+    tune = _source_command(sub, "tune", "the filter's noise from its own telemetry by "
+                           "maximum likelihood, no truth: tune.json, tune.md, "
+                           "tuned_noise.yaml, tune.png (RUN_DIR/tune/)")
     tune.add_argument("--params", type=_noise_keys, metavar="KEY,KEY,…",
                       default=None, help="the process-noise keys to tune (default: q_x, q_z, "
                       "q_w, q_px, q_pz, q_cx, q_cz)")
@@ -198,21 +208,12 @@ def build_parser() -> argparse.ArgumentParser:
     tune.add_argument("--bounds", action="append", default=[], type=_bound,
                       metavar="KEY=LOW:HIGH", help="search bounds of a tuned key (repeatable; "
                       "roll_variance for the factor)")
-    _out_args(tune, "output directory (default: RUN_DIR/tune, or tune/ beside the file)",
-              required=False, force="replace a non-empty --out (RUN_DIR/tune is replaced "
-              "anyway)")
-    batch = sub.add_parser("batch", help="batch least squares over spans of the telemetry, "
-                           "the paper's alternative to its filter, beside the filter and the "
-                           "smoother: estimate_batch.csv, batch.json, batch.png (RUN_DIR/batch/)")
-    batch.add_argument("source", type=Path, metavar="RUN_DIR|TELEMETRY.csv",
-                       help="a `dynprop run` or `estimate` directory, or a telemetry file "
-                       "(with --scenario)")
-    batch.add_argument("--scenario", help="scenario (default: the run directory's "
-                       "scenario.yaml)")
+    batch = _source_command(sub, "batch", "batch least squares over spans of the telemetry, "
+                            "the paper's alternative to its filter, beside the filter and "
+                            "the smoother: estimate_batch.csv, batch.json, batch.png "
+                            "(RUN_DIR/batch/)")
     batch.add_argument("--truth", type=Path, metavar="TRUTH.csv", help="the truth to judge "
                        "the estimates against (default: the run directory's truth.csv)")
-    batch.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
-                       help="override a scenario key (repeatable); VALUE is YAML")
     batch.add_argument("--span-h", type=float, metavar="H", help="length of each batch "
                        "(default: batch.span_h, 24 h)")
     batch.add_argument("--overlap-h", type=float, metavar="H", help="how far each batch "
@@ -220,9 +221,6 @@ def build_parser() -> argparse.ArgumentParser:
     batch.add_argument("--model", choices=("linear", "nonlinear"), help="the paper's linear "
                        "model (one least-squares solve) or the full gyrostat (Gauss–Newton); "
                        "default: batch.model, nonlinear")
-    _out_args(batch, "output directory (default: RUN_DIR/batch, or batch/ beside the file)",
-              required=False, force="replace a non-empty --out (RUN_DIR/batch is replaced "
-              "anyway)")
     report = sub.add_parser("report", help="one self-contained HTML page of a directory "
                             "dynprop wrote, opened offline: verdict, interactive figures, "
                             "tables, scenario, provenance (DIR/report.html)")
