@@ -21,7 +21,7 @@ import yaml
 from . import provenance
 from . import traces as tr
 from .cells import Table, Verdict, cell, flatten, text, unit_of
-from .render import Section
+from .render import Page, Section
 from .source import Source
 
 # A palette of ten (plotly's default) for figures with one trace per state.
@@ -148,6 +148,30 @@ def closing(src: Source, command: str | None, kind: str, run_dir: Path | None = 
     if scenario is not None and src.scenario is None:
         src = dataclasses.replace(src, scenario=scenario)
     return out + provenance.sections(src, command, kind)
+
+
+def page(src: Source, command: str | None, kind: str, title: str, subtitle: str,
+         sections: list[Section], run_dir: Path | None = None,
+         scenario: dict | None = None) -> Page:
+    """A command's page: its sections, then the closing ones (``closing``)."""
+    return Page(title, kind, subtitle, sections + closing(src, command, kind, run_dir, scenario))
+
+
+def run_scale(meta: dict) -> str:
+    """'seed S, epoch E, D days at Δt s, dynprop V': a scenario's (or a record's meta)
+    run, for a page's subtitle."""
+    return (f"seed {meta.get('seed')}, epoch {meta.get('epoch_utc')}, "
+            f"{float(meta.get('duration_s') or 0) / 86400:.3g} days at "
+            f"{meta.get('sample_interval_s')} s, dynprop {meta.get('dynprop_version')}")
+
+
+def as_written(src: Source, name: str, intro: str = "The report as written.") -> list[Section]:
+    """The command's own markdown report ``name`` (trim.md, tune.md, report.md) as a
+    section, its long paragraphs wrapped, when the directory holds it."""
+    md = src.path / name
+    if not md.is_file():
+        return []
+    return [Section(f"{Path(name).stem}-md", name, intro, pre=wrap_markdown(md.read_text()))]
 
 
 def wrap_markdown(md: str, width: int = 120) -> str:

@@ -19,7 +19,7 @@ import numpy as np
 from ...files.csvio import read_csv
 from .. import traces as tr
 from ..cells import Table, cell, text
-from ..page_parts import closing, record_table, run_dir_of, verdict, vline
+from ..page_parts import page, record_table, run_dir_of, verdict, vline
 from ..render import Page, Section
 from ..run_figures import STARTUP_S, Plot
 from ..source import ReportInputError, Source, read_json
@@ -256,8 +256,7 @@ def build(src: Source, command: str | None, requirement_deg: float | None = None
                                                                          "batch"),
                                  prefix="truth"))
     sections.append(Section("tables", "Tables", tables=rest))
-    sections += closing(src, command, "batch", run_dir)
-    title = f"{b.get('scenario')}: dynprop batch"
-    subtitle = (f"{b.get('model')} model, {b.get('span_h')} h spans, overlap "
-                f"{b.get('overlap_h')} h, a priori {b.get('apriori')}; {b.get('command') or ''}")
-    return Page(title, "batch", subtitle, sections)
+    return page(src, command, "batch", f"{b.get('scenario')}: dynprop batch",
+                f"{b.get('model')} model, {b.get('span_h')} h spans, overlap "
+                f"{b.get('overlap_h')} h, a priori {b.get('apriori')}; {b.get('command') or ''}",
+                sections, run_dir)

@@ -17,7 +17,7 @@ from scipy.stats import binom
 
 from ...montecarlo.stats import nees_inside_needed
 from ..cells import Table, cell, text
-from ..page_parts import closing, finite, record_table, verdict
+from ..page_parts import finite, page, record_table, verdict
 from ..render import Page, Section
 from ..run_page import requirement_of
 from ..source import Source, read_json
@@ -324,9 +324,7 @@ def build(src: Source, command: str | None, requirement_deg: float | None = None
                                                           "rms_after_convergence"),
                                       prefix="ekf"))
     sections.append(Section("tables", "Tables", tables=tables))
-    sections += closing(src, command, "montecarlo")
-    title = f"{mc.get('scenario')}: dynprop montecarlo"
-    subtitle = (f"seed {mc.get('seed')}, {mc.get('runs_ok')} of {mc.get('runs_requested')} "
+    return page(src, command, "montecarlo", f"{mc.get('scenario')}: dynprop montecarlo",
+                f"seed {mc.get('seed')}, {mc.get('runs_ok')} of {mc.get('runs_requested')} "
                 f"runs, {mc.get('grid_s') or 0:.4g} s grid, NEES from {conv} h, "
-                f"dynprop {mc.get('dynprop_version')}")
-    return Page(title, "montecarlo", subtitle, sections)
+                f"dynprop {mc.get('dynprop_version')}", sections)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from .. import traces as tr
 from ..cells import Table, cell, text
-from ..page_parts import closing, record_table, verdict, wrap_markdown
+from ..page_parts import as_written, page, record_table, run_scale, verdict
 from ..render import Page, Section
 from ..run_figures import Plot
 from ..source import Source
@@ -348,7 +348,7 @@ def _hline(y: float, xa: str, ya: str, color: str) -> dict:
 
 
 def build(src: Source, command: str | None, requirement_deg: float | None = None) -> Page:
-    report, path = src.record, src.path
+    report = src.record
     meta = report.get("meta") or {}
     intro = str(report.get("verdict") or "").replace("**", "")
     sections = [Section("verdict", "Verdict", intro, verdicts(report))]
@@ -375,16 +375,9 @@ def build(src: Source, command: str | None, requirement_deg: float | None = None
                             after=[budget_table(report), ideal_table(report)]))
     sections.append(Section("meta", "Tables", tables=[record_table(
         "lin-meta", meta, REPORT, "The run (report.json meta)", prefix="meta")]))
-    md = path / "report.md"
-    if md.is_file():
-        sections.append(Section("report-md", "report.md", "The report as written (its long "
-                                "paragraphs wrapped here), with its figures beside it (Files).",
-                                pre=wrap_markdown(md.read_text())))
+    sections += as_written(src, "report.md", "The report as written (its long paragraphs "
+                           "wrapped here), with its figures beside it (Files).")
     scen = {"name": meta.get("scenario"), "seed": meta.get("seed"),
             "epoch_utc": meta.get("epoch_utc"), "dynprop_version": meta.get("dynprop_version")}
-    sections += closing(src, command, "linearization", scenario=scen)
-    title = f"{meta.get('scenario')}: dynprop linearization"
-    subtitle = (f"seed {meta.get('seed')}, epoch {meta.get('epoch_utc')}, "
-                f"{(meta.get('duration_s') or 0) / 86400:.3g} days at "
-                f"{meta.get('sample_interval_s')} s, dynprop {meta.get('dynprop_version')}")
-    return Page(title, "linearization", subtitle, sections)
+    return page(src, command, "linearization", f"{meta.get('scenario')}: dynprop linearization",
+                run_scale(meta), sections, scenario=scen)

@@ -13,7 +13,7 @@ import numpy as np
 from ...files.csvio import comments, read_csv
 from .. import traces as tr
 from ..cells import Table, cell, text
-from ..page_parts import closing
+from ..page_parts import page, run_scale
 from ..render import Page, Section
 from ..run_figures import Plot
 from ..source import ReportInputError, Source
@@ -149,9 +149,5 @@ def build(src: Source, command: str | None, requirement_deg: float | None = None
         attitude(truth, tel, x_truth, x_tel, title, shapes, legend)]))
     sections.append(Section("wheels", "Wheels", plots=[
         wheels(truth, tel, x_truth, x_tel, title, shapes, legend)]))
-    sections += closing(src, command, "simulate")
-    page_title = f"{scenario.get('name')}: dynprop simulate"
-    subtitle = (f"seed {scenario.get('seed')}, epoch {scenario.get('epoch_utc')}, "
-                f"{float(scenario.get('duration_s') or 0) / 86400:.3g} days at "
-                f"{scenario.get('sample_interval_s')} s, dynprop {scenario.get('dynprop_version')}")
-    return Page(page_title, "simulate", subtitle, sections)
+    return page(src, command, "simulate", f"{scenario.get('name')}: dynprop simulate",
+                run_scale(scenario), sections)

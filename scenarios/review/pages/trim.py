@@ -11,15 +11,7 @@ from __future__ import annotations
 
 from .. import traces as tr
 from ..cells import Table, cell, flatten, lookup, text, unit_of
-from ..page_parts import (
-    closing,
-    finite,
-    points_figure,
-    record_table,
-    run_dir_of,
-    verdict,
-    wrap_markdown,
-)
+from ..page_parts import as_written, finite, page, points_figure, record_table, run_dir_of, verdict
 from ..render import Page, Section
 from ..run_figures import Plot
 from ..source import Source
@@ -162,13 +154,8 @@ def build(src: Source, command: str | None, requirement_deg: float | None = None
     tables.append(record_table("trim-record", t, TRIM, "trim.json, the rest: the batch, its "
                                "tuning, what it assumes and estimates", skip=OWN))
     sections.append(Section("tables", "Tables", tables=tables))
-    md = src.path / "trim.md"
-    if md.is_file():
-        sections.append(Section("trim-md", "trim.md", "The report as written.",
-                                pre=wrap_markdown(md.read_text())))
-    sections += closing(src, command, "trim", run_dir_of(src))
+    sections += as_written(src, "trim.md")
     b = t.get("batch") or {}
-    title = f"{t.get('scenario')}: dynprop trim"
-    subtitle = (f"batch {b.get('from_s')} … {b.get('to_s')} s ({b.get('duration_h')} h), "
-                f"{src.path}")
-    return Page(title, "trim", subtitle, sections)
+    return page(src, command, "trim", f"{t.get('scenario')}: dynprop trim",
+                f"batch {b.get('from_s')} … {b.get('to_s')} s ({b.get('duration_h')} h), "
+                f"{src.path}", sections, run_dir_of(src))

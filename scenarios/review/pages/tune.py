@@ -8,15 +8,7 @@ from __future__ import annotations
 
 from .. import traces as tr
 from ..cells import Table, cell, flatten, lookup, text, unit_of
-from ..page_parts import (
-    closing,
-    finite,
-    points_figure,
-    record_table,
-    run_dir_of,
-    verdict,
-    wrap_markdown,
-)
+from ..page_parts import as_written, finite, page, points_figure, record_table, run_dir_of, verdict
 from ..render import Page, Section
 from ..run_figures import Plot
 from ..source import Source
@@ -188,11 +180,7 @@ def build(src: Source, command: str | None, requirement_deg: float | None = None
               record_table("tune-record", t, TUNE, "tune.json, the rest: the telemetry, the "
                            "method, the likelihood and the optimizer", skip=OWN)]
     sections.append(Section("tables", "Tables", tables=tables))
-    md = src.path / "tune.md"
-    if md.is_file():
-        sections.append(Section("tune-md", "tune.md", "The report as written.",
-                                pre=wrap_markdown(md.read_text())))
-    sections += closing(src, command, "tune", run_dir_of(src, tel.get("run_dir")))
-    title = f"{t.get('scenario')}: dynprop tune"
-    subtitle = f"{tel.get('span_h')} h of {tel.get('file')}; {t.get('command') or ''}"
-    return Page(title, "tune", subtitle, sections)
+    sections += as_written(src, "tune.md")
+    return page(src, command, "tune", f"{t.get('scenario')}: dynprop tune",
+                f"{tel.get('span_h')} h of {tel.get('file')}; {t.get('command') or ''}",
+                sections, run_dir_of(src, tel.get("run_dir")))
