@@ -20,7 +20,7 @@ import yaml
 
 from . import provenance
 from . import traces as tr
-from .cells import Table, Verdict, cell, flatten, text, unit_of
+from .cells import Table, Verdict, cell, flatten, lookup, text, unit_of
 from .render import Page, Section
 from .source import Source
 
@@ -148,6 +148,23 @@ def closing(src: Source, command: str | None, kind: str, run_dir: Path | None = 
     if scenario is not None and src.scenario is None:
         src = dataclasses.replace(src, scenario=scenario)
     return out + provenance.sections(src, command, kind)
+
+
+def before_after_rows(before: dict, after: dict, source: str, prefix: str = "") -> list:
+    """Every figure of ``before`` beside the same key of ``after`` ("—" where it has
+    none) and the key's unit: ``source``'s ``{prefix}before.<key>`` and
+    ``{prefix}after.<key>``; an ``.inside`` verdict that fails after is marked."""
+    rows = []
+    for key, value in flatten(before):
+        try:
+            other = lookup(after, key)
+        except (KeyError, IndexError, TypeError):
+            other = None
+        flag = "failed" if key.endswith(".inside") and other is False else ""
+        rows.append([text(key), cell(value, source, f"{prefix}before.{key}"),
+                     cell(other, source, f"{prefix}after.{key}", css=flag) if other is not None
+                     else text("—"), text(unit_of(key))])
+    return rows
 
 
 def page(src: Source, command: str | None, kind: str, title: str, subtitle: str,

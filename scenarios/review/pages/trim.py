@@ -10,8 +10,17 @@ at full trim.
 from __future__ import annotations
 
 from .. import traces as tr
-from ..cells import Table, cell, flatten, lookup, text, unit_of
-from ..page_parts import as_written, finite, page, points_figure, record_table, run_dir_of, verdict
+from ..cells import Table, cell, text
+from ..page_parts import (
+    as_written,
+    before_after_rows,
+    finite,
+    page,
+    points_figure,
+    record_table,
+    run_dir_of,
+    verdict,
+)
 from ..render import Page, Section
 from ..run_figures import Plot
 from ..source import Source
@@ -81,16 +90,7 @@ def verify_table(t: dict) -> Table | None:
     v = t.get("verify")
     if not v:
         return None
-    before, after = v.get("before") or {}, v.get("after") or {}
-    rows = []
-    for key, value in flatten(before):
-        try:
-            other = lookup(after, key)
-        except (KeyError, IndexError, TypeError):
-            other = None
-        rows.append([text(key), cell(value, TRIM, f"verify.before.{key}"),
-                     cell(other, TRIM, f"verify.after.{key}") if other is not None
-                     else text("—"), text(unit_of(key))])
+    rows = before_after_rows(v.get("before") or {}, v.get("after") or {}, TRIM, "verify.")
     if "residual_fall" in v:
         rows.append([text("residual_fall (true κ before / after)"),
                      cell(v["residual_fall"], TRIM, "verify.residual_fall"), text(""), text("")])

@@ -7,8 +7,17 @@ each figure means: docs/tune.md).
 from __future__ import annotations
 
 from .. import traces as tr
-from ..cells import Table, cell, flatten, lookup, text, unit_of
-from ..page_parts import as_written, finite, page, points_figure, record_table, run_dir_of, verdict
+from ..cells import Table, cell, text
+from ..page_parts import (
+    as_written,
+    before_after_rows,
+    finite,
+    page,
+    points_figure,
+    record_table,
+    run_dir_of,
+    verdict,
+)
 from ..render import Page, Section
 from ..run_figures import Plot
 from ..source import Source
@@ -67,17 +76,7 @@ def estimated_table(t: dict) -> Table:
 
 def before_after_table(t: dict) -> Table:
     """Every figure of ``before`` beside the same key of ``after``."""
-    before, after = t.get("before") or {}, t.get("after") or {}
-    rows = []
-    for key, value in flatten(before):
-        try:
-            other = lookup(after, key)
-        except (KeyError, IndexError, TypeError):
-            other = None
-        flag = "failed" if key.endswith(".inside") and other is False else ""
-        rows.append([text(key), cell(value, TUNE, f"before.{key}"),
-                     cell(other, TUNE, f"after.{key}", css=flag) if other is not None
-                     else text("—"), text(unit_of(key))])
+    rows = before_after_rows(t.get("before") or {}, t.get("after") or {}, TUNE)
     return Table("tune-before-after", ["", "scenario's noise", "tuned noise", "unit"], rows,
                  "The filter with the scenario's noise and with the tuned noise (tune.json "
                  "before, after)")
