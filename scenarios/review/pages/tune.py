@@ -6,18 +6,10 @@ each figure means: docs/tune.md).
 
 from __future__ import annotations
 
+from .. import page_parts
 from .. import traces as tr
 from ..cells import Table, cell, text
-from ..page_parts import (
-    as_written,
-    before_after_rows,
-    finite,
-    page,
-    points_figure,
-    record_table,
-    run_dir_of,
-    verdict,
-)
+from ..page_parts import finite, points_figure, record_table, verdict
 from ..render import Page, Section
 from ..run_figures import Plot
 from ..source import Source
@@ -76,7 +68,7 @@ def estimated_table(t: dict) -> Table:
 
 def before_after_table(t: dict) -> Table:
     """Every figure of ``before`` beside the same key of ``after``."""
-    rows = before_after_rows(t.get("before") or {}, t.get("after") or {}, TUNE)
+    rows = page_parts.before_after_rows(t.get("before") or {}, t.get("after") or {}, TUNE)
     return Table("tune-before-after", ["", "scenario's noise", "tuned noise", "unit"], rows,
                  "The filter with the scenario's noise and with the tuned noise (tune.json "
                  "before, after)")
@@ -179,7 +171,8 @@ def build(src: Source, command: str | None, requirement_deg: float | None = None
               record_table("tune-record", t, TUNE, "tune.json, the rest: the telemetry, the "
                            "method, the likelihood and the optimizer", skip=OWN)]
     sections.append(Section("tables", "Tables", tables=tables))
-    sections += as_written(src, "tune.md")
-    return page(src, command, "tune", f"{t.get('scenario')}: dynprop tune",
-                f"{tel.get('span_h')} h of {tel.get('file')}; {t.get('command') or ''}",
-                sections, run_dir_of(src, tel.get("run_dir")))
+    sections += page_parts.as_written(src, "tune.md")
+    return page_parts.page(src, command, "tune", f"{t.get('scenario')}: dynprop tune",
+                           f"{tel.get('span_h')} h of {tel.get('file')}; "
+                           f"{t.get('command') or ''}",
+                           sections, page_parts.run_dir_of(src, tel.get("run_dir")))
