@@ -17,8 +17,9 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
+# --durations=20: each pass ends with its 20 slowest tests, for the suite's time budget.
 test: $(STAMP)
-	PYTHONWARNINGS=error $(BIN)/python -m pytest
+	PYTHONWARNINGS=error $(BIN)/python -m pytest --durations=20
 
 # The suite again as on another machine: CasADi's VM in place of the compiled C, and
 # numpy's matrix products on another OpenBLAS kernel (.ci/other_blas_kernel.py), so
@@ -28,7 +29,7 @@ test-vm: $(STAMP)
 	@kernel=$$($(BIN)/python .ci/other_blas_kernel.py); \
 	echo "second pass: CasADi VM, OpenBLAS kernel $${kernel:-unchanged}"; \
 	env DYNPROP_BACKEND=vm $${kernel:+OPENBLAS_CORETYPE=$$kernel} PYTHONWARNINGS=error \
-		$(BIN)/python -m pytest
+		$(BIN)/python -m pytest --durations=20
 
 demo: $(STAMP)
 	$(BIN)/dynprop run goes_next_equinox --out $(DEMO_DIR) --report

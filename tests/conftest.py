@@ -13,9 +13,11 @@ verdicts and messages they print, the API's processes, the notebook), which comp
 with no reference number, so the backend cannot change what they check.
 """
 
+import contextlib
 import importlib
 import importlib.abc
 import importlib.util
+import io
 import os
 import sys
 
@@ -66,3 +68,47 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(slow)
         elif "surface" in item.keywords:
             item.add_marker(surface)
+
+
+# --------------------------------------------------------------------------- shared runs
+# Runs that several test modules read, made once for the whole session.  The tests only
+# read them: one that changes a file copies the directory first.
+
+
+GAP_EPOCH = "epoch_utc=2026-03-20T22:00:00Z"   # 17:00 local: the night Sun gap 3.25–11.1 h in
+
+
+def _run_once(tmp_path_factory, name: str, *argv: str, command: str = "run"):
+    from dynprop.scenarios.cli import main
+    out = tmp_path_factory.mktemp(name) / "run"
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        rc = main([command, "goes_next_equinox", *argv, "--out", str(out)])
+    assert rc == 0, err.getvalue()
+    return out
+
+
+@pytest.fixture(scope="session")
+def run6(tmp_path_factory):
+    """`dynprop run goes_next_equinox --duration-s 21600`: 6 h at the default output
+    (64 s rows, telemetry.csv written), no Sun gap.  Read by test_api, test_messages
+    and test_estimate_run_fit."""
+    return _run_once(tmp_path_factory, "run6", "--duration-s", "21600")
+
+
+@pytest.fixture(scope="session")
+def gap_run(tmp_path_factory):
+    """13 h from 17:00 local on the equinox, every sample written
+    (output.interval_s = 0.512): one whole night Sun gap (3.25–11.1 h in) and its end.
+    Read by test_cli_run, test_estimate and test_irregular_telemetry."""
+    return _run_once(tmp_path_factory, "gap", "--duration-s", "46800", "--set",
+                     "output.interval_s=0.512", "--set", GAP_EPOCH)
+
+
+@pytest.fixture(scope="session")
+def linearization_13h(tmp_path_factory):
+    """`dynprop linearization goes_next_equinox` over the same 13 h (one whole Sun gap
+    and its end, which the sweep, the budget and the estimation tables need).  Read by
+    test_linearization and, on a copy, the report's browser test."""
+    return _run_once(tmp_path_factory, "lin", "--duration-s", "46800", "--set", GAP_EPOCH,
+                     command="linearization")

@@ -24,29 +24,27 @@ def _files(d: Path) -> dict[str, bytes]:
 
 
 @pytest.fixture(scope="module")
-def both(tmp_path_factory):
-    base = tmp_path_factory.mktemp("api")
-    rc, _, err = run_cli("run", "goes_next_equinox", "--duration-s", str(SHORT),
-                         "--out", str(base / "cli"))
-    assert rc == 0, err
+def both(run6, tmp_path_factory):
+    """The CLI's 6 h run (the session's ``run6``: `dynprop run goes_next_equinox
+    --duration-s 21600`), the same through the API, and a folder for the API's files."""
     r = dynprop.run(dynprop.load_scenario("goes_next_equinox", duration_s=SHORT))
-    return base, r
+    return run6, tmp_path_factory.mktemp("api"), r
 
 
 def test_run_gives_the_clis_summary_and_saves_its_files_byte_for_byte(both):
-    base, r = both
-    cli = json.loads((base / "cli" / "summary.json").read_text())
+    cli_dir, base, r = both
+    cli = json.loads((cli_dir / "summary.json").read_text())
     assert r.summary["yaw_error_rms_deg"] == cli["yaw_error_rms_deg"]
     r.save(base / "api")
-    mine, theirs = _files(base / "api"), _files(base / "cli")
+    mine, theirs = _files(base / "api"), _files(cli_dir)
     assert mine.keys() == theirs.keys()
     for name in theirs:
         assert mine[name] == theirs[name], name
 
 
 def test_open_run_reads_back_the_same_tables(both):
-    base, r = both
-    again = dynprop.open_run(base / "cli")
+    cli_dir, _, r = both
+    again = dynprop.open_run(cli_dir)
     assert isinstance(again, dynprop.RunResult)
     assert again.estimate.index.name == "t_s"
     np.testing.assert_array_equal(again.estimate.to_numpy(), r.estimate.to_numpy())
@@ -124,8 +122,8 @@ def _data_lines(path: Path) -> list[str]:
 
 
 def test_export_writes_the_clis_message_and_compares_as_it_does(both, tmp_path):
-    base, r = both
-    rc, out, err = run_cli("export", str(base / "cli"), "--format", "aem", "--what", "truth",
+    cli_dir, _, r = both
+    rc, out, err = run_cli("export", str(cli_dir), "--format", "aem", "--what", "truth",
                            "--out", str(tmp_path / "cli.aem"))
     assert rc == 0, err
     e = r.export(what="truth", out=tmp_path / "api.aem", truth=tmp_path / "cli.aem")
@@ -136,7 +134,7 @@ def test_export_writes_the_clis_message_and_compares_as_it_does(both, tmp_path):
     assert e.segments == [("2026-03-20T12:00:00.000000", "2026-03-20T17:59:28.000000", 338)]
     assert e.comparison["compared"] == 338 and e.comparison["angle_max_deg"] < 1e-9
     # Into the directory by default (a copy: the CLI's directory is compared whole above).
-    copy = Path(shutil.copytree(base / "cli", tmp_path / "copy"))
+    copy = Path(shutil.copytree(cli_dir, tmp_path / "copy"))
     apm = dynprop.export(copy, format="apm", what="truth", frame="orbit",
                          at="2026-03-20T13:00:00Z")
     assert apm.path == copy / "truth.apm" and apm.epoch == "2026-03-20T13:00:00.000000"

@@ -93,12 +93,6 @@ def short_run(tmp_path_factory) -> tuple[Path, str]:
 
 
 @pytest.fixture(scope="module")
-def gap_run(tmp_path_factory) -> Path:
-    """13 h holding one whole night Sun gap."""
-    return run_dir(tmp_path_factory, "gap", "goes_next_equinox", 46800, "--set", GAP_EPOCH)[0]
-
-
-@pytest.fixture(scope="module")
 def hour_run(tmp_path_factory) -> Path:
     return run_dir(tmp_path_factory, "hour", "goes_next_equinox", 3600)[0]
 

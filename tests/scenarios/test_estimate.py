@@ -12,7 +12,7 @@ import pytest
 
 from scenarios.files.csvio import read_csv
 
-from .test_cli_run import GAP_EPOCH, run_cli, run_dir
+from .test_cli_run import run_cli
 
 DT = 0.512
 STATES = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms", "N_px_Nm",
@@ -20,13 +20,6 @@ STATES = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms", "
 # truth.csv holds 10 significant digits: errors recomputed from it agree with the
 # run's (computed from doubles) to ~5e-10 of the values that enter them.
 CSV_REL = 5e-10
-
-
-@pytest.fixture(scope="module")
-def gap_run(tmp_path_factory) -> Path:
-    """13 h holding one whole night Sun gap and its end."""
-    return run_dir(tmp_path_factory, "est-gap", "goes_next_equinox", 46800, "--set",
-                   GAP_EPOCH)[0]
 
 
 def _rows(run: Path) -> tuple[str, list[str]]:

@@ -33,12 +33,6 @@ def _run(tmp_path_factory, name: str, *argv: str) -> Path:
 
 
 @pytest.fixture(scope="module")
-def run6(tmp_path_factory) -> Path:
-    """6 h at the default output cadence: no Sun-gap end, full-rate telemetry."""
-    return _run(tmp_path_factory, "fit6", "--set", f"duration_s={SIX_H}")
-
-
-@pytest.fixture(scope="module")
 def gap_run(tmp_path_factory) -> Path:
     """13 h holding the whole night Sun gap and its end, default output cadence."""
     return _run(tmp_path_factory, "fitgap", "--duration-s", "46800", "--set", GAP_EPOCH)

@@ -20,20 +20,13 @@ from scenarios.config import build
 from scenarios.config.loader import load_scenario
 from scenarios.files.csvio import read_csv
 
-from .test_cli_run import GAP_EPOCH, run_cli, run_dir
+from .test_cli_run import GAP_EPOCH, run_cli
 
 # 13 h estimates judged on gap-end verdicts and σ ratios to 1–2%,
 # far above any last-bit difference: the compiled pass runs them, the VM pass skips them.
 pytestmark = pytest.mark.slow_in_vm
 
 DT = 0.512
-
-
-@pytest.fixture(scope="module")
-def gap_run(tmp_path_factory) -> Path:
-    """13 h holding one whole night Sun gap and its end, every sample written."""
-    return run_dir(tmp_path_factory, "irregular", "goes_next_equinox", 46800, "--set",
-                   GAP_EPOCH)[0]
 
 
 def _resampled(run: Path, path: Path, t_new: np.ndarray, iso_epoch: str | None = None

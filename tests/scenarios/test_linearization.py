@@ -141,14 +141,12 @@ def test_eq11_divergence_matches_the_linear_twin(equinox):
 # --- the command -----------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def report_dir(tmp_path_factory):
-    """13 h from 17:00 local at 75° W on the equinox: one whole night Sun gap
-    (3.25–11.1 h into the run) and its end, which the sweep, the budget and the
-    estimation tables need; a whole day adds nothing but time."""
-    out = tmp_path_factory.mktemp("lin") / "report"
-    assert main(["linearization", "goes_next_equinox", "--duration-s", "46800",
-                 "--set", "epoch_utc=2026-03-20T22:00:00Z", "--out", str(out)]) == 0
-    return out
+def report_dir(linearization_13h):
+    """13 h from 17:00 local at 75° W on the equinox (the session's
+    ``linearization_13h``): one whole night Sun gap (3.25–11.1 h into the run) and its
+    end, which the sweep, the budget and the estimation tables need; a whole day adds
+    nothing but time."""
+    return linearization_13h
 
 
 def test_report_files(report_dir):

@@ -32,15 +32,6 @@ def one_error(err: str) -> str:
     return lines[0].removeprefix("dynprop: error: ")
 
 
-@pytest.fixture(scope="module")
-def run6(tmp_path_factory):
-    """A 6 h run: it writes telemetry.csv (up to two days runs do)."""
-    out = tmp_path_factory.mktemp("m") / "run6"
-    rc, _, err = run_cli("run", "goes_next_equinox", "--duration-s", "21600", "--out", out)
-    assert rc == 0, err
-    return out
-
-
 def telemetry_columns(t):
     return {"t_s": t, "roll_deg": 0 * t, "yaw_deg": 0 * t, "wheel1_rpm": 5485 + 0 * t,
             "wheel2_rpm": 5485 + 0 * t}
