@@ -18,16 +18,7 @@ from ..linear.noise import (
     tach_variance,
     yaw_variance,
 )
-from .covariance import (
-    PAPER_SIGMA_YAW_DEG,
-    alpha,
-    approx_yaw_variance,
-    care_steady_state,
-    closed_form_steady_state,
-    periodic_gap_covariance,
-    reduced,
-    roll_tach_steady_state,
-)
+from . import covariance as cov
 
 METHODS = {
     "eq54": "Eq. 54 closed form",
@@ -75,23 +66,23 @@ def covariance_report(p: ModelParams, noise: ProcessNoise, sensors: SensorSpecs 
     H, w0 = p.H_Nms, p.omega0_radps
     q = 0.5 * (noise.q_x + noise.q_z)
     Rc = continuous_R(H, sensors)
-    p11, p22, p12 = closed_form_steady_state(q, H, w0, Rc)
-    dare = roll_tach_steady_state(p, noise, sensors)
+    p11, p22, p12 = cov.closed_form_steady_state(q, H, w0, Rc)
+    dare = cov.roll_tach_steady_state(p, noise, sensors)
     filter_specs = filter_yaw_specs(sensors, yaw_inflation)
-    gap = periodic_gap_covariance(p, noise, filter_specs, gap_s=gap_s, period_s=period_s)
+    gap = cov.periodic_gap_covariance(p, noise, filter_specs, gap_s=gap_s, period_s=period_s)
     white = gap if yaw_inflation == 1.0 else \
-        periodic_gap_covariance(p, noise, sensors, gap_s=gap_s, period_s=period_s)
+        cov.periodic_gap_covariance(p, noise, sensors, gap_s=gap_s, period_s=period_s)
     methods = {
         "eq54": _entry(np.array([[p11, p12], [p12, p22]])),
-        "eq55": _entry(p22=approx_yaw_variance(q, H, w0)),
-        "care": _entry(care_steady_state(w0, H, Rc, noise.q_x, noise.q_z)),
-        "care_qw": _entry(care_steady_state(w0, H, Rc, noise.q_x, noise.q_z, noise.q_w)),
-        "dare_prior": _entry(reduced(dare["P_prior"], p)),
-        "dare_post": _entry(reduced(dare["P_post"], p)),
-        "gap_end": _entry(reduced(gap.P_gap_end, p)),
+        "eq55": _entry(p22=cov.approx_yaw_variance(q, H, w0)),
+        "care": _entry(cov.care_steady_state(w0, H, Rc, noise.q_x, noise.q_z)),
+        "care_qw": _entry(cov.care_steady_state(w0, H, Rc, noise.q_x, noise.q_z, noise.q_w)),
+        "dare_prior": _entry(cov.reduced(dare["P_prior"], p)),
+        "dare_post": _entry(cov.reduced(dare["P_post"], p)),
+        "gap_end": _entry(cov.reduced(gap.P_gap_end, p)),
         "gap_max": _entry(p22=gap.sigma_yaw_rad.max() ** 2),
         "gap_min": _entry(p22=gap.sigma_yaw_rad.min() ** 2),
-        "gap_end_white": _entry(reduced(white.P_gap_end, p)),
+        "gap_end_white": _entry(cov.reduced(white.P_gap_end, p)),
     }
     inputs = {"H_Nms": H, "omega0_radps": w0, "q": q, "q_w": noise.q_w, "dt_s": sensors.dt_s,
               "R_tach": tach_variance(sensors), "R_roll": roll_variance(sensors),
@@ -100,12 +91,12 @@ def covariance_report(p: ModelParams, noise: ProcessNoise, sensors: SensorSpecs 
               "yaw_noise_deg": sensors.yaw_noise_deg,
               "yaw_quantum_deg": sensors.yaw_quantum_deg,
               "R_k": combined_variance(H, sensors), "q_ratio": q / (w0**2 * H**2 * Rc),
-              "alpha": alpha(q, H, w0, Rc), "gap_s": gap_s, "period_s": period_s}
+              "alpha": cov.alpha(q, H, w0, Rc), "gap_s": gap_s, "period_s": period_s}
     return {"inputs": {k: float(v) for k, v in inputs.items()}, "methods": methods,
             "yaw_correlation_s": yaw_correlation_s,
             "gap": {"days_to_converge": gap.days,
                     "max_at_s": float(gap.times_s[np.argmax(gap.sigma_yaw_rad)] % period_s)},
-            "paper_sigma_yaw_deg": PAPER_SIGMA_YAW_DEG}
+            "paper_sigma_yaw_deg": cov.PAPER_SIGMA_YAW_DEG}
 
 
 def format_covariance_report(report: dict) -> str:
