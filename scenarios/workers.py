@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import os
 import signal
+import tempfile
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -104,6 +106,20 @@ class _MainlessSpawnContext(mp_context.SpawnContext):
     Process = _MainlessSpawnProcess
 
 
+# The forkserver listens on a socket at <temp dir>/pymp-XXXXXXXX/listener-XXXXXXXX, and
+# an AF_UNIX address holds 107 bytes on Linux, 103 on macOS: under a long TMPDIR the
+# server cannot bind ("AF_UNIX path too long") and no worker starts.
+_UNIX_ADDRESS_BYTES = 103
+_SOCKET_TAIL = len("/pymp-XXXXXXXX/listener-XXXXXXXX")
+
+
+def forkserver_fits(tempdir: str | None = None) -> bool:
+    """Whether the forkserver's socket under ``tempdir`` (default: the temporary
+    directory, TMPDIR) fits in an AF_UNIX address."""
+    base = tempfile.gettempdir() if tempdir is None else tempdir
+    return len(os.fsencode(base)) + _SOCKET_TAIL <= _UNIX_ADDRESS_BYTES
+
+
 @contextlib.contextmanager
 def clean_start_context(preload: list[str]) -> Iterator[mp_context.BaseContext]:
     """A multiprocessing context for worker pools whose processes start clean and
@@ -117,17 +133,21 @@ def clean_start_context(preload: list[str]) -> Iterator[mp_context.BaseContext]:
     block started them, so no process outlives the command.  Left running, they are
     children of a notebook kernel, which at shutdown signals them for 29 s (the
     tracker ignores SIGTERM); Jupyter kills the kernel after 5 s, before it removes
-    its temporary directories."""
-    if "forkserver" not in multiprocessing.get_all_start_methods():  # pragma: no cover
-        yield _MainlessSpawnContext()
-        return
+    its temporary directories.
+
+    spawn where there is no forkserver, or where its socket would not fit under the
+    temporary directory (``forkserver_fits``): each worker then imports dynprop itself,
+    a second or so, once per pool."""
     # multiprocessing's own singletons; _stop is what its test suite stops them with.
     from multiprocessing import forkserver, resource_tracker
     server, tracker = forkserver._forkserver, resource_tracker._resource_tracker
-    ours = [p for p, pid in ((server, server._forkserver_pid), (tracker, tracker._pid))
-            if pid is None]
-    ctx = _MainlessForkServerContext()
-    ctx.set_forkserver_preload(preload)
+    if "forkserver" in multiprocessing.get_all_start_methods() and forkserver_fits():
+        ctx = _MainlessForkServerContext()
+        ctx.set_forkserver_preload(preload)
+    else:
+        ctx, server = _MainlessSpawnContext(), None
+    ours = [p for p, pid in ((server, server and server._forkserver_pid),
+                             (tracker, tracker._pid)) if p is not None and pid is None]
     try:
         yield ctx
     finally:
