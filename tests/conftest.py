@@ -91,8 +91,8 @@ def _run_once(tmp_path_factory, name: str, *argv: str, command: str = "run"):
 @pytest.fixture(scope="session")
 def run6(tmp_path_factory):
     """`dynprop run goes_next_equinox --duration-s 21600`: 6 h at the default output
-    (64 s rows, telemetry.csv written), no Sun gap.  Read by test_api, test_messages
-    and test_estimate_run_fit."""
+    (64 s rows, telemetry.csv written), no Sun gap.  Read by test_api, test_messages,
+    test_estimate_run_fit and test_cli_run (its rerun's bytes)."""
     return _run_once(tmp_path_factory, "run6", "--duration-s", "21600")
 
 
@@ -100,7 +100,8 @@ def run6(tmp_path_factory):
 def gap_run(tmp_path_factory):
     """13 h from 17:00 local on the equinox, every sample written
     (output.interval_s = 0.512): one whole night Sun gap (3.25–11.1 h in) and its end.
-    Read by test_cli_run, test_estimate and test_irregular_telemetry."""
+    Read by test_cli_run, test_estimate, test_irregular_telemetry, test_stream (the
+    run in one window) and test_ekf_stream (the paper filter alone)."""
     return _run_once(tmp_path_factory, "gap", "--duration-s", "46800", "--set",
                      "output.interval_s=0.512", "--set", GAP_EPOCH)
 

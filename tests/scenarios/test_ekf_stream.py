@@ -19,8 +19,10 @@ BOTH = "estimator.filters=[paper, ekf]"
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    return {"paper": _run(tmp_path_factory, "paper", FULL),
+def runs(gap_run, tmp_path_factory):
+    """The paper filter alone (the session's ``gap_run``, FULL's settings), and with the
+    EKF beside it in one window and in two."""
+    return {"paper": (gap_run, json.loads((gap_run / "summary.json").read_text())),
             "one": _run(tmp_path_factory, "one", [*FULL, BOTH]),
             "many": _run(tmp_path_factory, "many", [*FULL, BOTH], window_samples=45_000,
                          processes=2)}

@@ -36,12 +36,15 @@ def _run(tmp_path_factory, name, overrides, window_samples=None, processes=1):
     return out, summary
 
 
-FULL = ["duration_s=46800", GAP_EPOCH, "output.interval_s=0.512", "output.telemetry=true"]
+# The session's gap_run (tests/conftest.py): telemetry.csv is written (up to two days).
+FULL = ["duration_s=46800", GAP_EPOCH, "output.interval_s=0.512"]
 
 
 @pytest.fixture(scope="module")
-def one_window(tmp_path_factory):
-    return _run(tmp_path_factory, "one", FULL)
+def one_window(gap_run):
+    """The 13 h in one window: the session's ``gap_run`` (`dynprop run` with FULL's
+    settings, the producer in its own process) and its summary."""
+    return gap_run, json.loads((gap_run / "summary.json").read_text())
 
 
 @pytest.fixture(scope="module")
