@@ -5,6 +5,7 @@ user's own ``sim.py`` or ``plots.py`` beside their notebook can shadow it."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -24,8 +25,13 @@ def _run(args, cwd):
 
 
 def test_the_wheel_installs_only_the_dynprop_namespace_and_resists_shadowing(tmp_path):
-    # `python -m build`: the sdist, then the wheel built from that sdist.
-    done = _run([sys.executable, "-m", "build", "--outdir", str(tmp_path / "dist"), str(ROOT)],
+    # `python -m build`: the sdist, then the wheel built from that sdist, from a copy of
+    # the source: setuptools writes its release tree into the project's folder, and a
+    # second build there at the same time (make test and make test-vm side by side)
+    # removed it under the first ("No such file or directory: dynprop-0.1.0/…").
+    src = shutil.copytree(ROOT, tmp_path / "src", ignore=shutil.ignore_patterns(
+        ".git", ".venv", "*.egg-info", "__pycache__", "build", "dist", "runs"))
+    done = _run([sys.executable, "-m", "build", "--outdir", str(tmp_path / "dist"), str(src)],
                 tmp_path)
     assert done.returncode == 0, done.stderr
     assert len(list((tmp_path / "dist").glob("dynprop-*.tar.gz"))) == 1
