@@ -24,11 +24,11 @@ from .inputs import filter_inputs, initial_prior, join_padded
 def ekf_design(s: Scenario) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """(model parameters, ω_n, X0, P0) of the EKF for ``s``: the nominal full inertia
     (products included), the orbit rate, the sample interval and the scenario's
-    process noise, with pitch's torque noise taken as roll's (the paper has no pitch
-    state); the prior is the paper filter's, pitch getting roll's σ."""
+    process noise, with pitch's white torque noise ``q_y`` (the pitch filter's: the
+    paper has no pitch state); the prior is the paper filter's, pitch getting roll's σ."""
     params, noise = build.estimator_model(s)
     J = build.build_spacecraft(s).J
-    q = {"q_x": noise.q_x, "q_y": noise.q_x, "q_z": noise.q_z, "q_w": noise.q_w,
+    q = {"q_x": noise.q_x, "q_y": s.estimator.process_noise.q_y, "q_z": noise.q_z, "q_w": noise.q_w,
          "q_px": noise.q_px, "q_pz": noise.q_pz, "q_cx": noise.q_cx, "q_cz": noise.q_cz}
     pm = m.pack_params(J, params.omega0_radps, s.sample_interval_s, q)
     x0, P0 = initial_prior(s, params)

@@ -2,9 +2,12 @@
 and its telemetry.
 
 - Model: the nominal diagonal inertias and orbit rate (``build.estimator_model``).
-- Noise: the white torque q_w and the torque random walk q_c are the scenario's roll
-  ones, q_x and q_cx.  The paper has no pitch state; the pitch axis sees the same
-  kinds of torque (solar, ripple), and the roll numbers are the nearest it tunes.
+- Noise: the white torque q_w and the torque random walk q_c are the scenario's
+  ``estimator.process_noise.q_y`` and ``q_cy``.  The paper has no pitch state; they
+  default to roll's q_x and q_cx defaults (the pitch axis sees the same kinds of
+  torque: solar, ripple), and are keys of their own so that `dynprop tune`, which
+  tunes the roll/yaw filter's q_x, never hands its roll numbers to pitch: a q_x cut
+  to 1e-12 made the pitch NEES 2644.
 - Prior: zero, with roll's initial σ for pitch, pitch rate and N_y (as the EKF takes
   roll's σ for its pitch).
 - Measurement: the Earth sensor's pitch, with the variance of its roll channel
@@ -42,10 +45,10 @@ class PitchDesign:
 
 
 def pitch_design(s: Scenario) -> PitchDesign:
-    params, noise = build.estimator_model(s)
-    i = s.estimator.initial_sigma
+    params, _ = build.estimator_model(s)
+    i, q = s.estimator.initial_sigma, s.estimator.process_noise
     sig = np.array([i.roll_deg * DEG, i.roll_rate_degps * DEG, i.N_cx_Nm])
-    return PitchDesign(params, PitchNoise(q_w=noise.q_x, q_c=noise.q_cx), np.zeros(3),
+    return PitchDesign(params, PitchNoise(q_w=q.q_y, q_c=q.q_cy), np.zeros(3),
                        np.diag(sig**2), roll_variance(build.estimator_sensor_specs(s)))
 
 

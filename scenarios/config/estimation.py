@@ -24,6 +24,11 @@ class ProcessNoise(_Section):
     q_pz: float = Field(3e-18, ge=0, description="periodic yaw torque random walk ((N m)²/s)")
     q_cx: float = Field(3e-18, ge=0, description="constant roll torque random walk ((N m)²/s)")
     q_cz: float = Field(3e-18, ge=0, description="constant yaw torque random walk ((N m)²/s)")
+    q_y: float = Field(5.4e-7, ge=0, description="pitch torque, white, for the pitch filter "
+                       "(Eq. 3b); not in the paper: q_x's default, and its own key so that "
+                       "tuning roll leaves pitch alone ((N m)² s)")
+    q_cy: float = Field(3e-18, ge=0, description="pitch torque random walk, for the pitch "
+                        "filter; q_cx's default ((N m)²/s)")
 
 
 class InitialSigma(_Section):

@@ -20,6 +20,8 @@ from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.telemetry import MIN_SUN_SEPARATION_DEG
 from pydantic import BaseModel, ConfigDict, Field, Strict, field_validator, model_validator
 
+from .screen import TelemetryScreen
+
 # The simulator's dataclasses hold the GOES-Next defaults; the schema reads them
 # from there so that the two can never disagree.
 _SOLAR = sim_env.SolarTorque()
@@ -366,6 +368,9 @@ class Telemetry(_Section):
         "from the scenario's epoch_utc; further is an error, since the Sun and orbit geometry "
         "is computed from the scenario's: at the orbit rate (7.3e-5 rad/s) 1 s moves it by "
         "0.004°, a tenth of the paper's 0.040° yaw σ (s)")
+    screen: TelemetryScreen = Field(default_factory=TelemetryScreen,
+                                    description="which values are screened as physically "
+                                    "impossible before the filter (docs/telemetry.md)")
 
     @field_validator("epoch_utc")
     @classmethod

@@ -24,11 +24,14 @@ from ..config import build
 from ..config.schema import Scenario
 from ..config.suggestions import cap_lines
 from .rundir import RunDirError
+from .screen import ScreenReport, screen, unit_problems
 from .telemetry_reader import (
+    file_names,
     file_times,
     measurements,
     read_input_csv,  # noqa: F401 (truth_file reads through it)
     read_table,
+    written_marks,
 )
 
 # A time tag may sit this fraction of a step off the grid: 5 ms at 0.512 s.  The
@@ -52,6 +55,7 @@ class GriddedTelemetry:
     n_rows: int
     steps: np.ndarray | None = None
     max_gap_s: float = float("inf")
+    screen: ScreenReport | None = None      # what ``files.screen`` took out, if read so
 
     @property
     def missing(self) -> np.ndarray:
@@ -151,11 +155,18 @@ def recorded_path(run_dir: Path, named: str) -> Path:
 
 
 def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
+    """``read_screened``'s columns."""
+    return read_screened(path, s)[0]
+
+
+def read_screened(path: Path, s: Scenario) -> tuple[dict[str, np.ndarray], ScreenReport]:
     """A telemetry file's canonical columns (``t_s`` from the scenario's epoch_utc,
     degrees, rpm), read as the scenario's ``telemetry`` section says
-    (``telemetry_reader``), and checked.  Every problem is reported, one line each
-    naming the column (or the row, or the key); the time tags' spacing is checked by
-    ``on_grid``."""
+    (``telemetry_reader``), checked, and screened (``files.screen``: a value the
+    spacecraft cannot produce becomes a dropout of its sensor, and the report says
+    which).  Every problem is reported, one line each naming the column (or the row,
+    or the key), a unit a factor away from the spacecraft's among them; the time tags'
+    spacing is checked by ``on_grid``."""
     path = Path(path)
     n_wheels = len(build.yaw_factors(s))
     wheels = tuple(f"wheel{i + 1}_rpm" for i in range(n_wheels))
@@ -167,6 +178,11 @@ def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
     c = s.telemetry.columns   # the file's names, for the messages
     if t is not None and len(t) < 2:
         problems.append(f"{path}: needs at least two samples")
+    names = file_names(s.telemetry, n_wheels)
+    problems += unit_problems(path, cols, s, names)
+    report = None
+    if t is not None and not problems:
+        cols, report = screen(cols, written_marks(table, s.telemetry, n_wheels), s, names)
     bad_t = ~np.isfinite(t) if t is not None else np.zeros(0, bool)
     if bad_t.any():
         problems.append(f"{path}: column {c.t_s} has a missing or non-numeric value in row "
@@ -176,7 +192,10 @@ def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
         if not np.all(np.isfinite(ends)):
             problems.append(f"{path}: column {getattr(c, f'wheel{k + 1}', name)} must have a "
                             "value in the first and the last row (a dropout is bridged "
-                            "between readings)")
+                            "between readings)" + (
+                                "; the screen took it out there (telemetry.screen)"
+                                if report is not None and any(
+                                    x.column == name for x in report.screened) else ""))
     present = np.isfinite(cols["yaw_deg"]) if "yaw_deg" in cols else None
     if "yaw_sigma_deg" in cols and present is not None:
         sig = cols["yaw_sigma_deg"][present]
@@ -189,11 +208,12 @@ def read_telemetry(path: Path, s: Scenario) -> dict[str, np.ndarray]:
             problems.append(f"{path}: {c.sun_head} must be 0 (dss), 1 (cass1) or 2 (cass2)")
     if problems:
         raise RunDirError("\n".join(cap_lines(problems)))
-    return cols
+    return cols, report
 
 
 def on_grid(cols: dict[str, np.ndarray], dt_s: float, max_gap_s: float,
-            path: Path | str = "telemetry") -> GriddedTelemetry:
+            path: Path | str = "telemetry", report: ScreenReport | None = None
+            ) -> GriddedTelemetry:
     """The rows of ``cols`` as the filter's samples.
 
     Rows must increase in time.  Rows that all sit on the grid t_0 + k·dt_s (within
@@ -215,12 +235,12 @@ def on_grid(cols: dict[str, np.ndarray], dt_s: float, max_gap_s: float,
     k = np.rint(k_float)
     if np.any(np.abs(k_float - k) > GRID_TOLERANCE):
         return GriddedTelemetry(dict(cols), np.arange(len(t)), len(t),
-                                step_intervals(t), max_gap_s)
+                                step_intervals(t), max_gap_s, report)
     index = k.astype(np.int64)
     n = int(index[-1]) + 1
     if n == len(t):
         # Every sample present: the file's values as they are (bit for bit).
-        return GriddedTelemetry(dict(cols), np.arange(n), len(t), None, max_gap_s)
+        return GriddedTelemetry(dict(cols), np.arange(n), len(t), None, max_gap_s, report)
     gridded = {"t_s": t[0] + np.arange(n) * dt_s}
     for name, values in cols.items():
         if name == "t_s":
@@ -231,7 +251,7 @@ def on_grid(cols: dict[str, np.ndarray], dt_s: float, max_gap_s: float,
     gridded["t_s"][index] = t  # rows keep their own tags (within tolerance of the grid)
     rows = np.full(n, -1, dtype=np.int64)
     rows[index] = np.arange(len(t))
-    return GriddedTelemetry(gridded, rows, len(t), None, max_gap_s)
+    return GriddedTelemetry(gridded, rows, len(t), None, max_gap_s, report)
 
 
 def off_grid_message(path, grid: GriddedTelemetry, dt_s: float, command: str) -> str:

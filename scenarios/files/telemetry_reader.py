@@ -21,7 +21,7 @@ computed from the scenario's epoch, so the scenario must start where the data do
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +44,10 @@ MEASUREMENTS = {
 # that a file in degrees and rpm is read bit for bit).
 TO_DEG = {"deg": None, "rad": RAD2DEG, "urad": 1e-6 * RAD2DEG}
 TO_RPM = {"rpm": None, "rad/s": RADPS2RPM}
+# The raw Sun-sensor angles of dynprop's own telemetry.csv, read when a file has them
+# (by these names, in degrees) so that the screen can judge each head's field of view.
+SUN_ANGLE_COLUMNS = tuple(f"{h}_{a}_deg" for h in ("dss", "cass1", "cass2")
+                          for a in ("alpha", "beta"))
 PARQUET_SUFFIXES = (".parquet", ".pq")
 NS_PER = {"s": 10**9, "ms": 10**6, "us": 10**3, "ns": 1}
 
@@ -58,6 +62,9 @@ class Table:
     names: list[str]
     epoch: str | None
     epoch_source: str
+    # Per numeric column, the cells whose text (or Parquet value) was a non-number
+    # such as ``nan`` or ``inf``: not a dropout (an empty cell) but a bad value.
+    written: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def is_parquet(path: Path) -> bool:
@@ -81,14 +88,51 @@ def read_table(path: Path, spec, n_wheels: int) -> Table:
     c = spec.columns
     wanted = {c.t_s, c.time_utc, *(mapped_name(c, k, canon) for k, (canon, _, _)
                                    in MEASUREMENTS.items()),
-              *(mapped_name(c, k, canon) for k, canon in wheel_keys(n_wheels))}
+              *(mapped_name(c, k, canon) for k, canon in wheel_keys(n_wheels)),
+              *SUN_ANGLE_COLUMNS}
     if is_parquet(path):
         return read_parquet(path, wanted, c.time_utc)
     cols = read_input_csv(path, "telemetry", text=(c.time_utc,), only=wanted)
     with open(path) as fh:
         header = next((line for line in fh if not line.startswith("#")), "")
     return Table(cols, header.strip().split(","), comments(path).get("epoch_utc"),
-                 "its # epoch_utc line")
+                 "its # epoch_utc line",
+                 non_number_cells(path, [n for n, v in cols.items() if v.dtype.kind == "f"]))
+
+
+def _has_non_number_text(path: Path, block: int = 1 << 24) -> bool:
+    """Whether the rows after the header hold ``nan`` or ``inf`` in any case, read a
+    block at a time (a season's file is not held whole for this)."""
+    with open(path) as fh:
+        line = fh.readline()
+        while line.startswith("#"):
+            line = fh.readline()
+        tail = ""
+        while chunk := fh.read(block):
+            text = tail + chunk.lower()
+            if "nan" in text or "inf" in text:
+                return True
+            tail = text[-2:]
+    return False
+
+
+def non_number_cells(path: Path, numeric: list[str]) -> dict[str, np.ndarray]:
+    """Per column of ``numeric``, the cells written as a non-finite number (``nan``,
+    ``inf``): the fast reader takes them as it takes an empty cell, a dropout, so they
+    are found here from the text, and only when the text has any at all."""
+    if not _has_non_number_text(path):
+        return {}
+    import pandas as pd
+    frame = pd.read_csv(path, comment="#", usecols=lambda n: n in numeric, dtype=str,
+                        keep_default_na=False, na_filter=False)
+    marks = {}
+    for name in frame.columns:
+        cells = frame[name].str.strip()
+        value = pd.to_numeric(cells, errors="coerce").to_numpy(dtype=float)
+        bad = (cells != "").to_numpy() & ~np.isfinite(value)
+        if bad.any():
+            marks[name] = bad
+    return marks
 
 
 def read_input_csv(path: Path, kind: str, **how) -> dict[str, np.ndarray]:
@@ -126,7 +170,7 @@ def read_parquet(path: Path, wanted: set[str], time_col: str) -> Table:
                           ) from None
     meta = {k.decode(errors="replace"): v.decode(errors="replace")
             for k, v in (schema.metadata or {}).items()}
-    columns, problems = {}, []
+    columns, problems, written = {}, [], {}
     for name in table.column_names:
         col = table.column(name)
         nulls = col.is_null().to_numpy(zero_copy_only=False)
@@ -147,13 +191,17 @@ def read_parquet(path: Path, wanted: set[str], time_col: str) -> Table:
                 or pa.types.is_boolean(col.type):
             values = col.cast(pa.float64()).to_numpy(zero_copy_only=False)
             columns[name] = np.where(nulls, np.nan, values)
+            # A null is a dropout; a NaN or infinity stored as a value is a bad value.
+            bad = ~nulls & ~np.isfinite(values)
+            if bad.any():
+                written[name] = bad
         else:
             problems.append(f"{path}: column {name} has type {col.type}, not numbers or "
                             "time tags")
     if problems:
         raise RunDirError("\n".join(problems))
     return Table(columns, list(schema.names), meta.get("epoch_utc"),
-                 "its Parquet metadata epoch_utc")
+                 "its Parquet metadata epoch_utc", written)
 
 
 def converted(values: np.ndarray, factor: float | None) -> np.ndarray:
@@ -193,7 +241,25 @@ def measurements(path: Path, table: Table, spec, n_wheels: int
             typo = closest(name, unused)
             problems.append(f"{path}: unknown column {typo}; did you mean '{name}'?" if typo
                             else f"{path}: missing column {name}")
+    for name in SUN_ANGLE_COLUMNS:
+        values = table.columns.get(name)
+        if values is not None and values.dtype.kind in "fiu":
+            out[name] = np.asarray(values, dtype=float)
     return out, problems
+
+
+def written_marks(table: Table, spec, n_wheels: int) -> dict[str, np.ndarray]:
+    """``Table.written`` by canonical column (``measurements``' names)."""
+    canon = {mapped_name(spec.columns, key, c): c for key, (c, _, _) in MEASUREMENTS.items()}
+    canon |= {mapped_name(spec.columns, key, c): c for key, c in wheel_keys(n_wheels)}
+    canon |= {n: n for n in SUN_ANGLE_COLUMNS}
+    return {canon[n]: m for n, m in table.written.items() if n in canon}
+
+
+def file_names(spec, n_wheels: int) -> dict[str, str]:
+    """The file's name of each canonical column, for messages."""
+    names = {c: mapped_name(spec.columns, key, c) for key, (c, _, _) in MEASUREMENTS.items()}
+    return names | {c: mapped_name(spec.columns, key, c) for key, c in wheel_keys(n_wheels)}
 
 
 def _span(seconds: float) -> str:

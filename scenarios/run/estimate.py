@@ -45,10 +45,11 @@ from .whole import TwoRuns, filter_telemetry
 def estimate_inputs(s: Scenario, path: Path, truth_path: Path | None = None):
     """The telemetry on the filter's grid and the truth at its samples (or None),
     every problem found reported before anything is written."""
-    from ..files.telemetry_file import on_grid, read_telemetry
+    from ..files.telemetry_file import on_grid, read_screened
     from ..files.truth_file import read_truth
 
-    grid = on_grid(read_telemetry(path, s), s.sample_interval_s, s.estimator.max_gap_s, path)
+    cols, report = read_screened(path, s)
+    grid = on_grid(cols, s.sample_interval_s, s.estimator.max_gap_s, path, report)
     if truth_path is None:
         return grid, None
     if _is_aem(truth_path):
@@ -187,6 +188,9 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
         arrays = comparison_arrays(runs.comparison_inputs(extra), t, present, nees_data,
                                    grid.columns)
         ends = [(b, b) for b in gap_ends(stats.gaps, n)]
+    if grid.screen is not None and grid.screen.count:
+        # The figures and the page mark the samples with a screened value.
+        arrays["screened_t_s"] = grid.screen.t_s[grid.screen.rows_any()]
     np.savez(stage / "comparison.npz", **arrays)
     summary = assemble_summary(s, params, real.backend, truth is not None, False, stats,
                                None if grid.regular else t)
@@ -212,7 +216,8 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     summary.update(output_interval_s=stride * step_s, telemetry_written=None,
                    daily=None)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s),
-                            **_truth_section(truth, t, ends)}
+                            **_truth_section(truth, t, ends),
+                            "screened": None if grid.screen is None else grid.screen.summary()}
     if attitude_only(truth):
         # What needs the states an attitude history does not hold (rates, h, the
         # torque states: their errors, (e/σ)², NEES) is not tested, null.

@@ -19,6 +19,7 @@ from scenarios.files.columns import UtcTags
 from scenarios.files.csvio import CsvAppender, read_csv, write_csv
 from scenarios.files.rundir import RunDirError
 from scenarios.files.telemetry_file import read_telemetry
+from scenarios.files.telemetry_reader import SUN_ANGLE_COLUMNS
 from scenarios.units import DEG, RPM2RADPS
 
 EPOCH = "2026-03-20T12:00:00Z"          # the bundled scenario's
@@ -124,7 +125,8 @@ def test_written_a_block_at_a_time_the_tagged_file_has_the_bytes_of_one_written_
 def test_own_file_reads_back_bit_for_bit(own, scenario, canonical):
     """Identity is the requirement: `estimate` on a run's telemetry is the run's filter."""
     written = read_csv(own / "telemetry.csv")
-    assert set(canonical) == {"t_s", *MEASURED}
+    # The raw Sun angles come along, read for the screen's field-of-view rule.
+    assert set(canonical) == {"t_s", *MEASURED, *SUN_ANGLE_COLUMNS}
     for name, values in canonical.items():
         assert values.tobytes() == written[name].tobytes(), name
 

@@ -228,7 +228,10 @@ def test_estimate_trim_and_tune_of_six_hours(six_hours, tmp_path):
     assert rc == 0, stderr
     s = json.loads((est / "summary.json").read_text())
     assert s["yaw_within_3sigma_at_gap_ends"] is None
-    assert all(c["passed"] is None for c in s["checks"].values())   # no truth given
+    # No truth given: every verdict on errors is untested; the NIS judges the
+    # innovations alone, and this clean file's are near 1.
+    assert all(c["passed"] is None for k, c in s["checks"].items() if k != "nis")
+    assert s["checks"]["nis"]["passed"] is True
     assert s["warnings"] == []
     assert vacuous(s) == []
     rc, _, stderr = run_cli("trim", str(run))
