@@ -191,9 +191,10 @@ def _nees_panel(ax, t_s, nees: dict, dof: int, bounds, win_s: float,
         if nees.get(key) is None:
             continue
         y = f64(nees[key])
-        ok = np.isfinite(y)
-        t_k, y_k = t_s[ok] / 3600.0, y[ok]   # NEES may be stored on a stride
-        values.append(y_k)
+        # NEES may be stored on a stride: its samples, and the breaks between them.
+        ok = np.isfinite(y) | np.isnan(t_s)
+        t_k, y_k = t_s[ok] / 3600.0, y[ok]
+        values.append(y_k[np.isfinite(y_k)])
         color = _NEES_COLORS[key]
         ax.plot(*stride(t_k, y_k), ".", ms=1.0, color=color, alpha=0.3, zorder=2)
         dot_handle(ax, color, f"NEES {_NEES_NAMES[key]}, per sample")
@@ -206,7 +207,7 @@ def _nees_panel(ax, t_s, nees: dict, dof: int, bounds, win_s: float,
                     label=f"NEES {_NEES_NAMES[key]}, full-rate max per row")
             values.append(y_max[np.isfinite(y_max)])
         mean = running_mean(y_k, window(t_s[ok], win_s))
-        ax.plot(*stride(t_k, mean, 4000), color=color, **_NEES_STYLE[key],
+        ax.plot(*every(t_k, mean, 4000), color=color, **_NEES_STYLE[key],
                 label=f"NEES {_NEES_NAMES[key]}, {wlabel}"
                 + (" (dashed, over the real)" if key == "linear" else ""))
     ax.axhline(dof, color="k", lw=0.9, zorder=3, label="expected value")

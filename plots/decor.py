@@ -11,18 +11,21 @@ import textwrap
 import numpy as np
 from matplotlib.ticker import FixedLocator, FuncFormatter, MultipleLocator
 
-from .reduce import bins, f64, finite, pct, runs_of
+from .palette import PALETTE
+from .reduce import bins, breaks, f64, finite, pct, runs_of
 
 GAP_LABEL = "no Sun-sensor yaw"
-GAP_COLOR = "0.85"
-SHORT_GAP_COLOR = "#cfe0ee"   # pale blue: a short outage, told apart from the Sun gap
+TELEMETRY_GAP_LABEL = "telemetry gap: no rows, nothing drawn across it"
+SCREENED_LABEL = "screened value (made a dropout, kept from the filter)"
 DAYS_BEYOND_H = 72.0     # time axes in days for spans longer than this
 _MAX_SHADED = 400        # beyond this many intervals, shade a per-bin mask instead
 
 
-def shade_mask(ax, t_h: np.ndarray, mask, label: str | None, color: str = GAP_COLOR,
-               alpha: float = 1.0) -> None:
-    """Bands over the intervals where ``mask`` is true.
+def shade_mask(ax, t_h: np.ndarray, mask, label: str | None,
+               color: str = PALETTE["sun_gap"].color,
+               alpha: float = PALETTE["sun_gap"].alpha) -> None:
+    """Bands over the intervals where ``mask`` is true (by default in the Sun gaps'
+    shade).
 
     With hundreds of intervals (dropout flicker) a drawing bin is shaded when most of
     its samples are masked: the same picture at pixel resolution, drawn fast.
@@ -36,7 +39,7 @@ def shade_mask(ax, t_h: np.ndarray, mask, label: str | None, color: str = GAP_CO
             ax.axvspan(t_h[a], t_h[b], color=color, alpha=alpha, lw=0, zorder=0,
                        label=label if k == 0 else None)
         return
-    starts, ends = bins(mask.size, 1000) or (np.arange(mask.size), np.arange(mask.size))
+    starts, ends = bins(mask.size, 1000, t_h) or (np.arange(mask.size), np.arange(mask.size))
     mostly = np.add.reduceat(mask.astype(np.int64), starts) * 2 >= (ends - starts + 1)
     x = np.column_stack([t_h[starts], t_h[ends]]).ravel()
     ax.fill_between(x, 0, 1, where=np.repeat(mostly, 2), transform=ax.get_xaxis_transform(),
@@ -72,8 +75,9 @@ def shade_gaps(ax, t_s: np.ndarray, t_h: np.ndarray, gap, min_gap_s: float,
                labels: tuple[str, str] | None) -> None:
     """The yaw outages, in two shades: Sun gaps (at least ``min_gap_s``: no head sees
     the Sun) and shorter outages (at the default geometry the ~1.3 h noon band,
-    where the Sun is too near the yaw axis for a yaw).  ``labels`` (Sun gap, short)
-    or None for an unlabelled panel."""
+    where the Sun is too near the yaw axis for a yaw); and in a third the telemetry
+    gaps, one at each break of ``t_s`` (a NaN row), from the row before it to the row
+    after.  ``labels`` (Sun gap, short) or None for an unlabelled panel."""
     gap = np.asarray(gap, dtype=bool)
     long = np.zeros_like(gap)
     for a, b in runs_of(gap):
@@ -81,7 +85,22 @@ def shade_gaps(ax, t_s: np.ndarray, t_h: np.ndarray, gap, min_gap_s: float,
             long[a:b + 1] = True
     long_label, short_label = labels if labels is not None else (None, None)
     shade_mask(ax, t_h, long, long_label)
-    shade_mask(ax, t_h, gap & ~long, short_label, color=SHORT_GAP_COLOR)
+    shade_mask(ax, t_h, gap & ~long, short_label, **PALETTE["outage"].mpl())
+    for k, i in enumerate(breaks(t_h)):
+        ax.axvspan(t_h[i - 1], t_h[i + 1], lw=0, zorder=0, **PALETTE["telemetry_gap"].mpl(),
+                   label=TELEMETRY_GAP_LABEL if k == 0 and labels is not None else None)
+
+
+def mark_screened(ax, t_h_screened, label: bool) -> None:
+    """A tick at the top of the panel at each screened value's time (hours), in the
+    screened values' colour; nothing, and no legend entry, without any."""
+    t = f64(t_h_screened) if t_h_screened is not None else np.empty(0)
+    if not t.size:
+        return
+    ax.plot(t, np.full(t.size, 0.985), transform=ax.get_xaxis_transform(), ls="none",
+            marker="|", ms=9, mew=1.2, zorder=9, clip_on=True,
+            color=PALETTE["screened"].color, alpha=PALETTE["screened"].alpha,
+            label=SCREENED_LABEL if label else "_screened")
 
 
 def gap_labels(min_gap_s: float) -> tuple[str, str]:

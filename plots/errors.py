@@ -25,6 +25,7 @@ from .decor import (  # noqa: E402
     fmt,
     gap_ends,
     gap_labels,
+    mark_screened,
     note_clipped,
     panel_figure,
     robust_half,
@@ -37,6 +38,7 @@ from .reduce import (  # noqa: E402
     f64,
     interval_stats,
     max_abs,
+    median_step,
     minmax_line,
     nice_interval_s,
     pct,
@@ -283,8 +285,11 @@ def row_label(t_s, series: dict) -> str:
     given = [s.get("row_interval") for s in series.values() if s.get("row_interval")]
     if given:
         return f"{given[0]:g} s"
-    dt = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 0.0
-    return f"{dt:.3g} s"
+    return f"{median_step(t_s):.3g} s"
+
+
+def _hours(t_s):
+    return None if t_s is None else f64(t_s) / 3600.0
 
 
 def _shader(t_s, t_h, gap, min_gap_s: float, labels):
@@ -295,7 +300,8 @@ def _shader(t_s, t_h, gap, min_gap_s: float, labels):
 
 def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
                 paper_sigma_deg: float, paper_sigma_label: str | None = None,
-                gap_labels: tuple[str, str] | None = None, warnings=None):
+                gap_labels: tuple[str, str] | None = None, warnings=None,
+                screened_t_s=None):
     """Estimation error vs time for roll, yaw and h, and beneath each real −
     linearized (with the twin) and EKF − paper filter (with the EKF); and pitch (the
     Eq. 3b filter's, a series of its own) when given.
@@ -312,7 +318,10 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
     of at least ``min_gap_s`` (Sun gaps) and shorter outages are shaded apart, with
     ``gap_labels`` (Sun gap, shorter).  The yaw panel draws the paper's ±3σ_yaw
     (``paper_sigma_deg``, written as ``paper_sigma_label``).  ``warnings``: the
-    run's warning messages, written under the figure in red.
+    run's warning messages, written under the figure in red.  ``t_s`` may hold
+    breaks (NaN rows, ``reduce``): telemetry gaps, shaded and never drawn across.
+    ``screened_t_s``: the times (s) of samples with a screened value, ticked at the
+    top of each error panel.
     """
     t_s = f64(t_s)
     t_h = t_s / 3600.0
@@ -330,15 +339,15 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
     fig, axes = panel_figure(ratios, warnings, 0.95)
     ends = gap_ends(t_s, gap, min_gap_s)
     # An RMS per interval over at least 8 rows: over fewer it is as noisy as the rows.
-    dt = float(np.median(np.diff(t_s))) if t_s.size > 1 else 0.0
     interval_s = nice_interval_s(float(t_s[-1] - t_s[0]) if t_s.size > 1 else 1.0,
-                                 min_s=8.0 * dt)
+                                 min_s=8.0 * median_step(t_s))
     shade = _shader(t_s, t_h, gap, min_gap_s, gap_labels)
     ref = (paper_sigma_deg, paper_sigma_label or f"Eq. 56: {paper_sigma_deg:.3f}°")
     step = row_label(t_s, series)
     for ax, (name, kind) in zip(axes, rows, strict=True):
         if kind == "error":
             _error_panel(ax, t_s, t_h, shade, name, series[name], ends, ref, interval_s, step)
+            mark_screened(ax, _hours(screened_t_s), label=True)
         else:
             _difference_panel(ax, t_s, t_h, shade, name, series[name], interval_s, step,
                               "ekf" if kind == "ekf" else "linear")
@@ -350,7 +359,8 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
 
 def plot_estimates(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
                    paper_sigma_deg: float, paper_sigma_label: str | None = None,
-                   gap_labels: tuple[str, str] | None = None, warnings=None):
+                   gap_labels: tuple[str, str] | None = None, warnings=None,
+                   screened_t_s=None):
     """Without a truth: the estimates of roll, yaw, h (and pitch when given) with the
     filter's ±3σ about them.  ``series[name]`` = {"unit", "estimate", "sigma"}; the
     other arguments as ``plot_errors``."""
@@ -367,6 +377,7 @@ def plot_estimates(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0,
         s = series[name]
         est, sig, unit = f64(s["estimate"]), np.abs(f64(s["sigma"])), s["unit"]
         shade(ax, True)
+        mark_screened(ax, _hours(screened_t_s), label=True)
         x, lo, hi = band(t_h, est - 3 * sig, est + 3 * sig)
         ax.fill_between(x, lo, hi, color="C0", alpha=0.22, lw=0, zorder=1,
                         label="estimate ± filter 3σ")

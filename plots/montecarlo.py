@@ -18,9 +18,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .decor import figure_legend, time_axis  # noqa: E402
+from .palette import PALETTE  # noqa: E402
 
 STATE_LABELS = ("roll", "roll rate", "yaw", "yaw rate", "h", "N_px", "N_pz", "N_cx", "N_cz")
-_GAP = "0.88"
+_GAP = PALETTE["sun_gap"]
 
 
 _CAPTION_PT = 14.0      # the caption's strip at the bottom: 8 pt text and its margin
@@ -42,7 +43,7 @@ def _caption(fig, caption: str, legend_axes=(), ncol: int = 4) -> None:
 
 def _shade(ax, gaps_h, label=True) -> None:
     for k, (a, b) in enumerate(np.reshape(gaps_h, (-1, 2))):
-        ax.axvspan(a, b, color=_GAP, zorder=0, label="Sun gap (median)" if label and k == 0
+        ax.axvspan(a, b, **_GAP.mpl(), lw=0, zorder=0, label="Sun gap (median)" if label and k == 0
                    else None)
 
 

@@ -6,6 +6,11 @@ reduced first: a slow trace to a min/max pair per pixel column (the same picture
 the full trace), a noisy one to its min/max band and RMS per time interval (what an
 engineer reads off a noisy error), a point cloud to a stride subsample.  Every
 function works on copies: the caller's arrays are never modified.
+
+A time array may hold breaks: rows whose time (and every value) is NaN, each standing
+for a telemetry gap between the rows either side (``scenarios/figures/marks.py``
+puts them there).  No bin, interval or line spans a break, so nothing is drawn
+across a gap.
 """
 
 from __future__ import annotations
@@ -36,13 +41,25 @@ def max_abs(a, default: float = 0.0) -> float:
     return float(np.max(np.abs(a))) if a.size else default
 
 
-def bins(n: int, nbins: int = NBINS):
-    """Start and end (inclusive) indices of ``nbins`` equal-count bins, or None if n is small."""
+def bins(n: int, nbins: int = NBINS, t=None):
+    """Start and end (inclusive) indices of ``nbins`` equal-count bins, or None if n is
+    small.  With the time array ``t``, each break (a NaN time) is a bin of its own,
+    so no bin reaches across a gap."""
     if n <= 2 * nbins:
         return None
     starts = np.linspace(0, n, nbins + 1)[:-1].astype(int)
+    if t is not None:
+        brk = np.flatnonzero(np.isnan(f64(t)))
+        if brk.size:
+            starts = np.unique(np.r_[starts, brk, brk + 1])
+            starts = starts[starts < n]
     ends = np.r_[starts[1:], n] - 1
     return starts, ends
+
+
+def breaks(t) -> np.ndarray:
+    """Indices of the break rows (NaN times) of a time array."""
+    return np.flatnonzero(np.isnan(f64(t)))
 
 
 def minmax_line(t_h: np.ndarray, y) -> tuple[np.ndarray, np.ndarray]:
@@ -52,7 +69,7 @@ def minmax_line(t_h: np.ndarray, y) -> tuple[np.ndarray, np.ndarray]:
     A bin with no finite value gives NaN, so data gaps stay gaps.
     """
     y = f64(y)
-    b = bins(y.size)
+    b = bins(y.size, t=t_h)
     if b is None:
         return t_h, y
     starts, ends = b
@@ -65,7 +82,7 @@ def minmax_line(t_h: np.ndarray, y) -> tuple[np.ndarray, np.ndarray]:
 def band(t_h: np.ndarray, lower, upper) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x, lo, hi) for fill_between: the per-bin min of ``lower`` and max of ``upper``."""
     lower, upper = f64(lower), f64(upper)
-    b = bins(lower.size)
+    b = bins(lower.size, t=t_h)
     if b is None:
         return t_h, lower, upper
     starts, ends = b
@@ -87,9 +104,12 @@ def nice_interval_s(span_s: float, n_target: int = 300, min_s: float = 0.0) -> f
 def interval_stats(t_s: np.ndarray, y, interval_s: float):
     """Per time interval: (x, lo, hi, rms) with x the interval's [start, end] pairs
     (each statistic repeated twice), for a band and a step-like line.  NaN-aware;
-    an interval with no finite value gives NaN."""
+    an interval with no finite value gives NaN, and a break (NaN time) is an interval of
+    its own, so the line breaks there."""
     t_s, y = f64(t_s), f64(y)
-    k = np.floor((t_s - t_s[0]) / interval_s).astype(np.int64)
+    timed = np.isfinite(t_s)
+    k = np.full(t_s.size, -1, dtype=np.int64)
+    k[timed] = np.floor((t_s[timed] - t_s[0]) / interval_s).astype(np.int64)
     starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
     ends = np.r_[starts[1:], y.size] - 1
     ok = np.isfinite(y)
@@ -114,10 +134,16 @@ def stride(t_h: np.ndarray, y, n_max: int = MAX_DOTS):
 
 def every(t_h: np.ndarray, y, n_max: int = MAX_DOTS):
     """Every k-th sample, NaN kept (a line drawn from it breaks where the data do):
-    for smooth series such as running means."""
+    for smooth series such as running means.  Every break is kept, its value NaN."""
     y = f64(y)
     step = max(1, y.size // n_max)
-    return t_h[::step], y[::step]
+    brk = breaks(t_h)
+    if not brk.size:
+        return t_h[::step], y[::step]
+    idx = np.union1d(np.arange(0, y.size, step), brk)
+    out = y[idx]
+    out[np.isnan(f64(t_h)[idx])] = np.nan
+    return t_h[idx], out
 
 
 def running_mean(y, window: int) -> np.ndarray:
@@ -139,11 +165,16 @@ def running_mean(y, window: int) -> np.ndarray:
 
 
 def window(t_s: np.ndarray, seconds: float) -> int:
-    """Samples in ``seconds`` at the median step of ``t_s``."""
-    if t_s.size < 2:
-        return 1
-    dt = float(np.median(np.diff(t_s)))
+    """Samples in ``seconds`` at the median step of ``t_s`` (breaks left out)."""
+    dt = median_step(t_s)
     return max(1, int(round(seconds / dt))) if dt > 0 else 1
+
+
+def median_step(t) -> float:
+    """The median step between rows, breaks (NaN times) left out; 0 under two rows."""
+    t = f64(t)
+    d = np.diff(t[np.isfinite(t)])
+    return float(np.median(d)) if d.size else 0.0
 
 
 def runs_of(mask) -> list[tuple[int, int]]:

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .decor import figure_legend, shade_mask, time_axis  # noqa: E402
+from .palette import PALETTE  # noqa: E402
 
 
 def plot_trim(shape_t_s: np.ndarray, shape_xz: np.ndarray, kappa_Nm: float, sigma_Nm: float,
@@ -29,7 +30,8 @@ def plot_trim(shape_t_s: np.ndarray, shape_xz: np.ndarray, kappa_Nm: float, sigm
     for i, (ax, name) in enumerate(zip(axes, ("roll", "yaw"), strict=True)):
         fit = kappa_Nm * shape_xz[:, i]
         band = sigma_Nm * np.abs(shape_xz[:, i])
-        shade_mask(ax, t_h, eclipse, "eclipse" if i == 0 else None)
+        shade_mask(ax, t_h, eclipse, "eclipse" if i == 0 else None,
+                   **PALETTE["eclipse"].mpl())
         ax.plot(np.asarray(rows_t_s) / 3600.0, filter_xz[:, i], lw=0.8, color="0.45",
                 label="filter's running estimate, less the fitted constant")
         if truth_t_s is not None:

@@ -12,15 +12,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .decor import time_axis  # noqa: E402
+from .palette import PALETTE  # noqa: E402
 
 
 def shade_intervals(ax, t_h: np.ndarray, mask: np.ndarray, label: str | None) -> None:
-    """Grey bands over the intervals where ``mask`` is true."""
+    """Bands in the eclipse shade over the intervals where ``mask`` is true."""
     if not np.any(mask):
         return
     edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
     for k, (a, b) in enumerate(zip(edges[::2], edges[1::2], strict=True)):
-        ax.axvspan(t_h[a], t_h[b - 1], color="0.85", zorder=0, label=label if k == 0 else None)
+        ax.axvspan(t_h[a], t_h[b - 1], **PALETTE["eclipse"].mpl(), lw=0, zorder=0,
+                   label=label if k == 0 else None)
 
 
 def plot_truth(t_s: np.ndarray, attitude_deg: dict[str, np.ndarray], h_Nms: np.ndarray,

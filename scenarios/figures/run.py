@@ -2,7 +2,8 @@
 `dynprop plot DIR`): read its files and hand arrays to ``plots``.
 
 A `run` or `estimate` directory is drawn from scenario.yaml and comparison.npz
-alone, by ``plot_run_figures``, which both the commands and `dynprop plot` call:
+alone (cut at its telemetry gaps, ``marks``), by ``plot_run_figures``, which both
+the commands and `dynprop plot` call:
 ``figure_set`` decides the figures from the keys comparison.npz holds, so a redraw
 gives exactly the set the command drew.  A `simulate` directory (no comparison.npz)
 gets truth.png and telemetry.png from its CSV files.
@@ -33,6 +34,7 @@ from ..files.csvio import read_csv
 from ..files.rundir import RunDirError
 from ..workers import worker_pool
 from . import save_figure
+from .marks import cut_at_gaps
 
 # Columns of the comparison arrays: the model's state indices (estimator.linear.model).
 COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
@@ -123,7 +125,8 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float, scenario: dict,
                 summary: dict | None):
     eq55 = _eq55_deg(scenario)
     kwargs = {"paper_sigma_deg": eq55, "paper_sigma_label": f"Eq. 55: {eq55:.4f}°",
-              "gap_labels": _gap_labels(scenario, min_gap_s), "warnings": _warnings(summary)}
+              "gap_labels": _gap_labels(scenario, min_gap_s), "warnings": _warnings(summary),
+              "screened_t_s": c.get("screened_t_s")}
     if "err_real" not in c:
         series = {n: {"unit": UNITS[n], "estimate": c["x_real"][:, COLUMNS[n]],
                       "sigma": c["sigma"][:, COLUMNS[n]]} for n in UNITS}
@@ -211,8 +214,10 @@ def _run_builders(run_dir: Path) -> tuple[list[str], dict]:
     scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
     title = _title(scenario)
     with np.load(run_dir / "comparison.npz") as npz:
-        c = {k: npz[k] for k in npz.files}
-    gap = c["yaw_present"] < 0.5
+        cut = cut_at_gaps({k: npz[k] for k in npz.files})
+    c = dict(cut)
+    # Computed on every row, then cut: an outage running through a telemetry gap stays one.
+    gap = cut.rows(cut.source["yaw_present"] < 0.5)
     # Sun gaps as summary.json counts them (not the noon outages).
     min_gap_s = 3600.0 * scenario["estimator"]["sun_gap_min_h"]
     summary = _summary(run_dir)

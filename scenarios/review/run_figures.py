@@ -4,7 +4,10 @@ arrays the PNG figures are drawn from), summary.json and daily.csv.
 Every time figure has one x axis under its stacked panels, and the page links the
 x axes of all of them (render's script), so zooming one zooms all: the error
 panels, consistency, torques and telemetry stay on the same span.  Sun gaps,
-shorter yaw outages and eclipses are shaded behind every panel.
+shorter yaw outages, telemetry gaps and eclipses are shaded behind every panel, in
+the PNG figures' colours (``figures.marks``).  The arrays come cut at the
+telemetry gaps (``figures.marks.Cut``): nothing is drawn across one.  Screened
+values are ticked at the top of the error panels.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from dynprop.estimator.linear import model as em
 
+from ..figures.marks import Cut
 from . import traces as tr
 
 # comparison.npz's columns: the model's state indices (estimator.linear.model), as
@@ -50,12 +54,12 @@ class Axis:
 # flatten everything after it (the autoscale button shows it).
 STARTUP_S = 3600.0
 
-def time_axis(c: dict, summary: dict, duration_s: float, eclipse: list[tuple[float, float]],
+def time_axis(c: Cut, summary: dict, duration_s: float, eclipse: list[tuple[float, float]],
               min_gap_h: float) -> Axis:
     """Rows in hours (days beyond three days); shading for the Sun gaps summary.json
     lists, the shorter yaw outages (runs of three days or less: beyond, a year's 700
-    noon outages would bury the gaps) and the eclipses (truth.csv's ``eclipse``, in
-    seconds)."""
+    noon outages would bury the gaps), the telemetry gaps and the eclipses
+    (truth.csv's ``eclipse``, in seconds)."""
     scale, unit = tr.time_unit(duration_s)
     x = c["t_s"] / scale
     gaps = [(a * 3600 / scale, b * 3600 / scale) for a, b in summary.get("sun_gaps_h") or []]
@@ -63,12 +67,18 @@ def time_axis(c: dict, summary: dict, duration_s: float, eclipse: list[tuple[flo
     legend = [tr.legend_only(f"Sun gap (≥ {min_gap_h:g} h without yaw)",
                              tr.SHADES["sun_gap"])] if gaps else []
     if duration_s <= 3 * 86400.0 and "yaw_present" in c:
-        short = [s for s in tr.spans(x, c["yaw_present"] < 0.5)
+        # Judged on every row, then cut: an outage running through a telemetry gap is one.
+        short = [s for s in tr.spans(x, c.rows(c.source["yaw_present"] < 0.5))
                  if (s[1] - s[0]) * scale < min_gap_h * 3600]
         shapes += tr.shades(short, "outage")
         if short:
             legend.append(tr.legend_only("shorter yaw outage (noon, dropouts)",
                                          tr.SHADES["outage"]))
+    holes = [(a / scale, b / scale) for a, b in c.gaps_s]
+    shapes += tr.shades(holes, "telemetry_gap")
+    if holes:
+        legend.append(tr.legend_only("telemetry gap (no rows: nothing drawn across it)",
+                                     tr.SHADES["telemetry_gap"]))
     ecl = [(a / scale, b / scale) for a, b in eclipse]
     shapes += tr.shades(ecl, "eclipse")
     if ecl:
@@ -140,13 +150,14 @@ def errors(c: dict, ax: Axis, eq55_deg: float | None) -> Plot:
             lo, hi = _extremes(c, "err_real_minus_linear", j)
             data += tr.series(ax.x, c["err_real_minus_linear"][:, j],
                               f"{n}: real − linearized", color, y, lo, hi)
+    layout = _layout(panels, ax, shapes=shapes)
+    data += _screened(c, ax, layout, sum(1 for p in panels if "real −" not in p["title"]))
     caption = ("Estimate − truth with the filter's ±3σ; the linearized error is the same "
                "filter on the linear model's telemetry, against the linear model. "
                + ("Pitch is its own 3-state filter's (Eq. 3b). " if "err_pitch" in c else "")
                + (f"Red dotted: ±3σ_yaw of Eq. 55 ({eq55_deg:.4f}°). " if eq55_deg else "")
                + "The first hour (the filter's start-up) is left out of the initial scales. "
                "Drag to zoom (every time figure follows), double-click to reset.")
-    layout = _layout(panels, ax, shapes=shapes)
     return Plot("errors", "Errors against the truth", caption, {"data": data, "layout": layout})
 
 
@@ -163,8 +174,38 @@ def estimates(c: dict, ax: Axis) -> Plot:
                           group="sig", show=False, outline=True)
         data += tr.series(ax.x, est, "estimate", tr.COLORS["real"], y, group="est",
                           show=i == 0)
+    layout = _layout(panels, ax)
+    data += _screened(c, ax, layout, len(panels))
     return Plot("errors", "Estimates (no truth)", "The filter's estimates and their ±3σ.",
-                {"data": data, "layout": _layout(panels, ax)})
+                {"data": data, "layout": layout})
+
+
+def _screened(c, ax: Axis, layout: dict, n_panels: int) -> list[dict]:
+    """Ticks at the top of each of the first ``n_panels`` panels at the times of the
+    screened values (comparison.npz's ``screened_t_s``; none when absent): on a
+    hidden 0–1 axis over each panel, added to ``layout``.  Beyond ``MAX_POINTS``
+    the times are rounded to the page's resolution first."""
+    t = np.asarray(c.get("screened_t_s", []), dtype=float) / ax.scale
+    t = t[np.isfinite(t)]
+    if not t.size or not n_panels:
+        return []
+    if t.size > tr.MAX_POINTS:
+        res = (ax.range[1] - ax.range[0]) / tr.MAX_POINTS or 1.0
+        t = np.unique(np.round(t / res)) * res
+    first = sum(1 for k in layout if k.startswith("yaxis")) + 1
+    color = tr.SHADES["screened"]
+    out = []
+    for k in range(n_panels):
+        key = first + k
+        layout[f"yaxis{key}"] = {"overlaying": tr.axis(k), "anchor": "x", "range": [0, 1],
+                                 "visible": False, "fixedrange": True}
+        out.append({"type": "scatter", "mode": "markers", "name": "screened value (a dropout)",
+                    "x": tr.typed(t), "y": tr.typed(np.full(t.size, 0.97)),
+                    "yaxis": f"y{key}", "legendgroup": "screened", "showlegend": k == 0,
+                    "marker": {"symbol": "line-ns-open", "size": 10, "color": color,
+                               "line": {"width": 1.5, "color": color}},
+                    "hovertemplate": "screened value<extra></extra>"})
+    return out
 
 
 def consistency(c: dict, ax: Axis, summary: dict) -> Plot | None:
@@ -184,7 +225,7 @@ def consistency(c: dict, ax: Axis, summary: dict) -> Plot | None:
             if f"nees_{key}" not in c:
                 continue
             v = c[f"nees_{key}"]
-            ok = np.isfinite(v)
+            ok = np.isfinite(v) | np.isnan(ax.x)   # its samples, and the breaks between
             hi = c.get(f"nees_{key}_max")
             data += tr.series(ax.x[ok], v[ok], name, color, "y",
                               None if hi is None else v[ok], None if hi is None else hi[ok],
@@ -194,9 +235,9 @@ def consistency(c: dict, ax: Axis, summary: dict) -> Plot | None:
     base = len(panels)
     for j, m in enumerate(("roll", "yaw", "h")):
         v = c["nis_real"][:, j]
-        ok = np.isfinite(v)
-        if not ok.any():
+        if not np.isfinite(v).any():
             continue
+        ok = np.isfinite(v) | np.isnan(ax.x)   # binned, a band: the breaks cut it
         y = tr.axis(len(panels))
         panels.append({"title": f"NIS {m}"})
         data += tr.series(ax.x[ok], v[ok], f"NIS {m}", tr.COLORS["real"], y,

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..figures.marks import cut_at_gaps
 from ..files.csvio import read_csv
 from . import provenance, run_figures, verdict
 from .cells import Table, cell, flatten, text, unit_of
@@ -144,6 +145,8 @@ def _build(src: Source, command: str | None, requirement_deg: float | None, c) -
     daily = _daily(path)
     duration = float(summary.get("duration_s") or (c["t_s"][-1] - c["t_s"][0]))
     min_gap_h = float((scenario.get("estimator") or {}).get("sun_gap_min_h", 4.0))
+    # The figures draw the rows cut at the telemetry gaps; the numbers read every row.
+    raw, c = c, cut_at_gaps(c)
     ax = run_figures.time_axis(c, summary, duration, eclipses(path), min_gap_h)
     eq55 = summary.get("analytic_sigma_yaw_deg")
     requirement = requirement_of(scenario, requirement_deg)
@@ -151,7 +154,7 @@ def _build(src: Source, command: str | None, requirement_deg: float | None, c) -
 
     verdicts = [verdict.against_filter(summary), verdict.against_paper(summary),
                 verdict.against_requirement(summary, requirement,
-                                            _daily_rms(summary, daily, c))]
+                                            _daily_rms(summary, daily, raw))]
     if summary.get("ekf"):
         verdicts.insert(1, verdict.against_filter(summary, "EKF σ",
                                                   "ekf_gap_end_yaw_within_3sigma"))

@@ -8,6 +8,9 @@ because a reviewer looks for the worst excursion and an average would hide it.
 Arrays go into the page as little-endian float32 in base64 (plotly.js's typed-array
 form): a quarter of the text of decimal numbers, and float32 is what
 comparison.npz stores.
+
+An x array may hold breaks (NaN rows, ``figures.marks``: a telemetry gap between
+the rows either side): no bin spans one, and plotly.js breaks a line at it.
 """
 
 from __future__ import annotations
@@ -17,13 +20,15 @@ import math
 
 import numpy as np
 
+from ..figures.marks import PALETTE
+
 MAX_POINTS = 3000        # per trace: two days' 2,700 rows as they are; a year's 493,000
                          # rows in bins of 165
 COLORS = {"real": "#1f5fa8", "linear": "#e07b00", "ekf": "#2a9d3a", "smoothed": "#7a3fb0",
           "sigma": "#555555", "truth": "#111111", "paper": "#b22222", "band": "#1f5fa8",
           "teal": "#0097a7"}
-SHADES = {"sun_gap": "rgba(255, 196, 0, 0.22)", "outage": "rgba(255, 196, 0, 0.09)",
-          "eclipse": "rgba(60, 60, 140, 0.20)"}
+# The PNG figures' colours for the same kinds (plots.palette): one scheme.
+SHADES = {kind: shade.rgba() for kind, shade in PALETTE.items()}
 
 
 def typed(a) -> dict:
@@ -39,11 +44,17 @@ def time_unit(duration_s: float) -> tuple[float, str]:
     return (86400.0, "days") if duration_s > 3 * 86400.0 else (3600.0, "hours")
 
 
-def bin_starts(n: int, max_points: int = MAX_POINTS) -> np.ndarray | None:
-    """Row index where each bin starts, or None when ``n`` rows fit as they are."""
+def bin_starts(n: int, max_points: int = MAX_POINTS, x=None) -> np.ndarray | None:
+    """Row index where each bin starts, or None when ``n`` rows fit as they are.
+    With ``x``, each break (a NaN) is a bin of its own: no bin spans a gap."""
     if n <= max_points:
         return None
-    return np.arange(0, n, math.ceil(n / max_points))
+    starts = np.arange(0, n, math.ceil(n / max_points))
+    brk = np.flatnonzero(np.isnan(np.asarray(x, dtype=float))) if x is not None else []
+    if len(brk):
+        starts = np.unique(np.concatenate([starts, brk, brk + 1]))
+        starts = starts[starts < n]
+    return starts
 
 
 def extremes(y, starts: np.ndarray, low=None, high=None) -> tuple[np.ndarray, np.ndarray]:
@@ -115,7 +126,7 @@ def series(x, y, name: str, color: str, yaxis: str = "y", low=None, high=None,
     (``outline``: its two edges as thin lines, for a series drawn over another's
     band, where two fills would blend into a third colour)."""
     x = np.asarray(x, dtype=float)
-    starts = bin_starts(len(x))
+    starts = bin_starts(len(x), x=x)
     if starts is None:
         out = []
         if low is not None and high is not None:
@@ -138,7 +149,7 @@ def sigma_band(x, sigma, yaxis: str, name: str = "±3σ (filter)", color: str = 
     zigzag)."""
     x = np.asarray(x, dtype=float)
     s = 3.0 * np.asarray(sigma, dtype=float)
-    starts = bin_starts(len(x))
+    starts = bin_starts(len(x), x=x)
     g = group or name
     if starts is not None:
         lo, hi = extremes(s, starts)
@@ -182,10 +193,13 @@ def axis(i: int) -> str:
 
 def spans(t_unit, mask) -> list[tuple[float, float]]:
     """[start, end) of each run of True in ``mask``, in the axis unit (a span ends at
-    the first row after it, so a one-row span still shows)."""
+    the first row after it, so a one-row span still shows; at its last row when a
+    break follows it)."""
     t = np.asarray(t_unit, dtype=float)
     runs = _runs(np.asarray(mask, dtype=bool))
-    return [(float(t[a]), float(t[min(b, len(t) - 1)])) for a, b in runs]
+    ends = [min(b, len(t) - 1) for _, b in runs]
+    return [(float(t[a]), float(t[e] if np.isfinite(t[e]) else t[e - 1]))
+            for (a, _), e in zip(runs, ends, strict=True)]
 
 
 def shades(intervals, kind: str) -> list[dict]:
