@@ -43,7 +43,8 @@ def _scenario_command(sub, name: str, help: str, out: str | None = None,
 
 def _source_command(sub, name: str, help: str) -> argparse.ArgumentParser:
     """A command that reads telemetry (`tune`, `batch`): a run directory or a file with
-    ``--scenario``, ``--set``, and ``--out`` defaulting to RUN_DIR/<name>."""
+    ``--scenario``, ``--set``, `estimate`'s telemetry group (``_telemetry_args``), and
+    ``--out`` defaulting to RUN_DIR/<name>."""
     p = sub.add_parser(name, help=help)
     p.add_argument("source", type=Path, metavar="RUN_DIR|TELEMETRY.csv",
                    help="a `dynprop run` or `estimate` directory, or a telemetry file "
@@ -52,6 +53,7 @@ def _source_command(sub, name: str, help: str) -> argparse.ArgumentParser:
                    "scenario.yaml)")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="override a scenario key (repeatable); VALUE is YAML")
+    _telemetry_args(p)
     _out_args(p, f"output directory (default: RUN_DIR/{name}, or {name}/ beside the file)",
               required=False, force=f"replace a non-empty --out (RUN_DIR/{name} is replaced "
               "anyway)")
@@ -193,6 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
     trim.add_argument("--to-s", type=float, metavar="T", help="batch end (s, default: the last)")
     trim.add_argument("--telemetry", type=Path, metavar="FILE",
                       help="telemetry CSV (default: RUN_DIR/telemetry.csv)")
+    _telemetry_args(trim)
     trim.add_argument("--verify", action="store_true", help="fly the recommended tab over the "
                       "same span (RUN_DIR/trim/verify/) and compare before and after")
     tune = _source_command(sub, "tune", "the filter's noise from its own telemetry by "

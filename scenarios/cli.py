@@ -38,7 +38,8 @@ def _tuned(args) -> tuple[list[str], dict | None]:
 
 def _telemetry_overrides(args) -> list[str]:
     """``--column``, ``--unit`` and ``--epoch-utc`` as the ``telemetry`` keys they set
-    (names and epochs quoted, so that YAML reads them as text: a column ``ON``)."""
+    (names and epochs quoted, so that YAML reads them as text: a column ``ON``), before
+    the user's own ``--set``: for `estimate`, `tune`, `trim` and `batch` alike."""
     import json
     out = [f"telemetry.columns.{k}={json.dumps(v)}" for k, v in getattr(args, "column", [])]
     out += [f"telemetry.units.{k}={json.dumps(v)}" for k, v in getattr(args, "unit", [])]
@@ -228,7 +229,8 @@ def _cmd_plot(args) -> int:
 def _cmd_trim(args) -> int:
     from .trim.report import one_line, run_trim
     start = time.perf_counter()
-    d = run_trim(args.run_dir, args.from_s, args.to_s, args.telemetry, args.verify)
+    d = run_trim(args.run_dir, args.from_s, args.to_s, args.telemetry, args.verify,
+                 _telemetry_overrides(args))
     print(one_line(d))
     print(f"{time.perf_counter() - start:.1f} s; wrote {args.run_dir}/trim/: trim.json, "
           "trim.md, trim.png" + (", verify/" if args.verify else ""))
@@ -243,7 +245,8 @@ def _cmd_batch(args) -> int:
             raise InputError(f"--{name.replace('_', '-')}: {v:g} must be a positive number of "
                              "hours" + (" or 0" if name == "overlap_h" else ""))
     start = time.perf_counter()
-    d, out = run_batch(args.source, args.scenario, args.set, args.truth, args.out, args.model,
+    d, out = run_batch(args.source, args.scenario, _telemetry_overrides(args) + list(args.set),
+                       args.truth, args.out, args.model,
                        args.span_h, args.overlap_h, force=args.force or args.out is None,
                        command=shlex.join(["dynprop", *args.argv]))
     print(one_line(d))
@@ -262,7 +265,8 @@ def _cmd_tune(args) -> int:
     options = TuneOptions(tie_xz=args.tie_xz, roll_variance=args.roll_variance,
                           bounds={k: (lo, hi) for k, lo, hi in args.bounds}, **kw)
     start = time.perf_counter()
-    d, out = run_tune(args.source, args.scenario, args.set, args.out, options,
+    d, out = run_tune(args.source, args.scenario, _telemetry_overrides(args) + list(args.set),
+                      args.out, options,
                       force=args.force or args.out is None,
                       command=shlex.join(["dynprop", *args.argv]))
     print(one_line(d))

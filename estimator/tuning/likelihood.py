@@ -36,7 +36,9 @@ from dynprop.rollout.chunks import ChunkedRollout
 from ..kalman.filter import Measurements, _inputs
 from ..kalman.steps import N_UT, pack
 from ..linear.model import N_STATES, ModelParams, ProcessNoise
+from ..linear.steps import per_step, roll_blocks
 from ..linear.transition import process_noise_integral
+from .intervals import BLOCK, StepNoise, step_rows
 from .steps import N_ACC, N_BASE, likelihood_step, n_fisher, score_step, score_step_ad
 
 LOG_2PI = float(np.log(2 * np.pi))
@@ -106,13 +108,14 @@ def noise_model(params: ModelParams, dt: float, groups: dict[str, dict[str, floa
 
 
 @lru_cache(maxsize=16)
-def _engine(kind: str, n_q: int, roll: bool, backend: str | None, k: int = 0
-            ) -> ChunkedRollout:
+def _engine(kind: str, n_q: int, roll: bool, backend: str | None, k: int = 0,
+            per: bool = False) -> ChunkedRollout:
     if kind == "score":
         step = score_step(n_q, roll, k)
     else:
         step = {"ll": likelihood_step, "score_ad": score_step_ad}[kind](n_q, roll)
-    return ChunkedRollout(step, 4096, 256, backend)
+    # Off the grid each step reads its own parameter row (``linear.steps.per_step``).
+    return ChunkedRollout(per_step(step) if per else step, 4096, 256, backend)
 
 
 @dataclass(frozen=True)
@@ -134,7 +137,11 @@ class Evaluation:
 class Likelihood:
     """The telemetry, prior and model of one filter run, ready to be evaluated at any
     θ: ``evaluate`` (one pass), ``score`` (one pass with sensitivities) and
-    ``innovations`` (ν and S at every sample).  Nothing is rebuilt per θ."""
+    ``innovations`` (ν and S at every sample).  Nothing is rebuilt per θ.
+
+    ``disc`` is the one step's ``Discretization`` on the scenario's grid, or for
+    telemetry off it a ``intervals.StepNoise`` of each step's own Φ, Γ and unit Q_d
+    (of the same groups as ``model``), whose rows each pass reads per step."""
 
     def __init__(self, meas: Measurements, disc, x0, P0, model: NoiseModel, u=None,
                  bridge_noise: np.ndarray | None = None, backend: str | None = None):
@@ -152,19 +159,47 @@ class Likelihood:
         self.s0 = np.concatenate([x0, pack(0.5 * (P0 + P0.T))])
         qw_coef = [g.get("q_w", 0.0) for g in model.groups]
         qw_fixed = 0.0 if any(qw_coef) else model.fixed.q_w
+        self.backend = backend
+        self.steps = disc if isinstance(disc, StepNoise) else None
+        if self.steps is not None:
+            if len(self.steps) != n or self.steps.groups != model.groups:
+                raise ValueError(f"the step table must hold the model's groups over {n} steps")
+            self._qw_map = np.array([qw_fixed, *qw_coef], dtype=float)
+            return
         self._p_head = np.concatenate([
             np.asarray(disc.Phi, float).ravel(order="F"),
             np.asarray(disc.Gamma, float).ravel(order="F"),
             np.zeros(N_UT), pack(model.unit_w),
             *(pack(U) for U in model.units), [qw_fixed], qw_coef])
-        self.backend = backend
         n2 = 2 * N_STATES**2
         self._qd = slice(n2, n2 + N_UT)
 
-    def _p(self, theta) -> np.ndarray:
+    def _check(self, theta) -> np.ndarray:
         theta = np.asarray(theta, dtype=float)
         if theta.shape != (self.model.n,) or not np.all(np.isfinite(theta) & (theta >= 0)):
             raise ValueError(f"θ must be {self.model.n} finite non-negative numbers")
+        return theta
+
+    def _roll(self, kind: str, theta, s0, every: bool, k: int = 0, idx=(),
+              qd_of_theta: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """One pass off the grid: the last state and (with ``every``) every step's aux,
+        each step's parameter row made a block at a time (``intervals.step_rows``)."""
+        theta = self._check(theta)
+        m = self.model
+        eng = _engine(kind, m.n_q, m.roll, self.backend, k, per=True)
+        tail = np.concatenate([self._qw_map, theta])
+        directions = [(j, m.groups[j].get("q_w", 0.0), 0.0) if j < m.n_q else (None, 0.0, 1.0)
+                      for j in idx]
+
+        def params_of(a, b):
+            return step_rows(self.steps, np.arange(a, b), theta, tail, directions, qd_of_theta)
+        cols = np.arange(eng.n_aux) if every else np.arange(0)
+        last, aux, _ = roll_blocks(eng, s0, self.inputs, self.n_samples, params_of, cols,
+                                   np.arange(0), np.arange(0), BLOCK)
+        return last, aux if every else None
+
+    def _p(self, theta) -> np.ndarray:
+        theta = self._check(theta)
         p = np.concatenate([self._p_head, theta])
         p[self._qd] = pack(self.model.Qd(theta))
         return p
@@ -177,8 +212,11 @@ class Likelihood:
 
     def evaluate(self, theta) -> Evaluation:
         """ln L at θ: one filter pass, no history kept."""
-        eng = _engine("ll", self.model.n_q, self.model.roll, self.backend)
         s0 = np.concatenate([self.s0, np.zeros(N_ACC)])
+        if self.steps is not None:
+            last, _ = self._roll("ll", theta, s0, False)
+            return self._finish(theta, last[N_BASE:N_BASE + N_ACC])
+        eng = _engine("ll", self.model.n_q, self.model.roll, self.backend)
         last, _, _ = eng.run_columns(s0, self.inputs, self._p(theta), np.arange(0),
                                      np.arange(0), np.arange(0))
         return self._finish(theta, last[N_BASE:N_BASE + N_ACC])
@@ -192,16 +230,20 @@ class Likelihood:
         n = self.model.n
         idx = np.arange(n) if subset is None else np.asarray(subset, dtype=np.int64)
         k = len(idx) if derived else n
-        p = self._p(theta)
-        if derived:
-            eng = _engine("score", self.model.n_q, self.model.roll, self.backend, k)
-            p = np.concatenate([p, self._directions(idx)])
-        else:     # the step forms Q_d(θ) itself from Q_fixed
-            eng = _engine("score_ad", self.model.n_q, self.model.roll, self.backend)
-            p[self._qd] = pack(self.model.Qd_fixed)
         s0 = np.concatenate([self.s0, np.zeros(N_ACC + N_BASE * k + k + n_fisher(k))])
-        last, _, _ = eng.run_columns(s0, self.inputs, p, np.arange(0), np.arange(0),
-                                     np.arange(0))
+        if self.steps is not None:
+            last, _ = (self._roll("score", theta, s0, False, k, idx) if derived else
+                       self._roll("score_ad", theta, s0, False, qd_of_theta=False))
+        else:
+            p = self._p(theta)
+            if derived:
+                eng = _engine("score", self.model.n_q, self.model.roll, self.backend, k)
+                p = np.concatenate([p, self._directions(idx)])
+            else:     # the step forms Q_d(θ) itself from Q_fixed
+                eng = _engine("score_ad", self.model.n_q, self.model.roll, self.backend)
+                p[self._qd] = pack(self.model.Qd_fixed)
+            last, _, _ = eng.run_columns(s0, self.inputs, p, np.arange(0), np.arange(0),
+                                         np.arange(0))
         ev = self._finish(theta, last[N_BASE:N_BASE + N_ACC])
         i = N_BASE + N_ACC + N_BASE * k
         F = np.zeros((k, k))
@@ -223,9 +265,12 @@ class Likelihood:
 
     def innovations(self, theta) -> tuple[np.ndarray, np.ndarray]:
         """ν and S (N, 3: roll, yaw, h) at θ, NaN where no update."""
-        eng = _engine("ll", self.model.n_q, self.model.roll, self.backend)
         s0 = np.concatenate([self.s0, np.zeros(N_ACC)])
-        _, aux = eng.run_final(s0, self.inputs, self._p(theta))
+        if self.steps is not None:
+            _, aux = self._roll("ll", theta, s0, True)
+        else:
+            eng = _engine("ll", self.model.n_q, self.model.roll, self.backend)
+            _, aux = eng.run_final(s0, self.inputs, self._p(theta))
         nu, S = aux[:, :3].copy(), aux[:, 3:].copy()
         nu[~self.present] = np.nan
         S[~self.present] = np.nan

@@ -33,6 +33,7 @@ from dynprop.estimator.kalman.filter import FilterResult, kalman_filter, unpack
 from dynprop.estimator.kalman.preprocess import yaw_momentum
 from dynprop.estimator.linear import model as em
 from dynprop.estimator.linear.noise import torque_noise_density
+from dynprop.estimator.linear.steps import StepTable
 from dynprop.estimator.linear.transition import discretize
 from dynprop.sim import geomag
 from dynprop.sim.frames import nadir_body
@@ -84,12 +85,17 @@ class Batch:
         return round((self.k1 - 1) * self.dt_s, 9)
 
 
-def choose_batch(t_s: np.ndarray, dt_s: float, from_s: float | None, to_s: float | None
-                 ) -> Batch:
+def choose_batch(t_s: np.ndarray, dt_s: float, from_s: float | None, to_s: float | None,
+                 regular: bool = True) -> Batch:
     """The batch on the telemetry's grid (default: all of it); TrimError if it is
-    outside the telemetry or empty (``batch_problems`` judges whether it is enough)."""
-    k_all = np.rint(np.asarray(t_s) / dt_s).astype(np.int64)
-    lo, hi = int(k_all[0]), int(k_all[-1])
+    outside the telemetry or empty (``batch_problems`` judges whether it is enough).
+    Telemetry off the grid (``regular`` False) is bounded by the grid times inside its
+    first and last sample."""
+    if regular:
+        k_all = np.rint(np.asarray(t_s) / dt_s).astype(np.int64)
+        lo, hi = int(k_all[0]), int(k_all[-1])
+    else:
+        lo, hi = int(np.ceil(t_s[0] / dt_s - 1e-9)), int(np.floor(t_s[-1] / dt_s + 1e-9))
     problems = []
     k0 = lo if from_s is None else int(np.ceil(from_s / dt_s - 1e-9))
     k1 = hi if to_s is None else int(np.floor(to_s / dt_s + 1e-9))
@@ -215,25 +221,35 @@ class TrimResult:
 
 
 def estimate_kappa(s: Scenario, cols: dict[str, np.ndarray], batch: Batch,
-                   stride: int = 125) -> TrimResult:
-    """κ̂ ± σ and the recommendation from the telemetry columns ``cols`` (on the
-    grid, telemetry.csv's names) over ``batch``."""
+                   stride: int = 125, regular: bool = True) -> TrimResult:
+    """κ̂ ± σ and the recommendation from the telemetry columns ``cols`` (telemetry.csv's
+    names) over ``batch``: on the scenario's grid, or (``regular`` False) each sample at
+    its own time, the filter stepping over each interval (``estimator.linear.steps``)
+    as `dynprop estimate`'s does; ``stride`` is then in the scenario's steps."""
     t_shape, shape, sunlit = solar_unit_torque(s, batch)
     problems = batch_problems(batch, sunlit)
     if problems:
         raise TrimError("\n".join(problems))
     t_all = np.asarray(cols["t_s"], dtype=float)
-    k = np.rint(t_all / batch.dt_s).astype(np.int64)
-    sel = (k >= batch.k0) & (k < batch.k1)
+    if regular:
+        k = np.rint(t_all / batch.dt_s).astype(np.int64)
+        sel = (k >= batch.k0) & (k < batch.k1)
+    else:
+        sel = (t_all >= batch.from_s - 1e-9) & (t_all <= batch.to_s + 1e-9)
     roll, yaw, speeds, sigma, head = telemetry_inputs(s, cols)
     pick = [None if v is None else v[sel] for v in (roll, yaw, speeds, sigma, head)]
     t = t_all[sel]
     params, noise = build.estimator_model(s)
-    disc = discretize(params, trim_noise(s, noise), batch.dt_s)
+    q = trim_noise(s, noise)
+    disc = (discretize(params, q, batch.dt_s) if regular
+            else StepTable.from_times(params, q, t))
     pitch = cols["pitch_deg"][sel] * DEG if "pitch_deg" in cols else None
     known = known_torques(s, t, pick[2], pick[0], pitch)
-    meas, u, extra = filter_inputs(s, params, *pick, known_Nm=known)
+    meas, u, extra = filter_inputs(s, params, *pick, known_Nm=known,
+                                   t_s=None if regular else t)
     n = len(t)
+    if not regular:   # the figure's rows as often in time as on the grid
+        stride = max(1, round(stride * batch.dt_s / float(np.median(np.diff(t)))))
     rows = np.unique(np.r_[np.arange(0, n, stride), n - 1])
     result: FilterResult = kalman_filter(meas, disc, *initial_prior(s, params), u=u,
                                          extra=extra, rows=rows)

@@ -42,18 +42,17 @@ def telemetry_path(run_dir: Path, given: Path | None) -> Path:
                     "with output.telemetry: true); give one with --telemetry FILE")
 
 
-def read_run(run_dir: Path, telemetry: Path | None):
-    """The run's scenario, its telemetry on the filter grid, and whether it has a truth."""
-    from ..files.telemetry_file import off_grid_message
+def read_run(run_dir: Path, telemetry: Path | None, overrides=()):
+    """The run's scenario (with ``overrides``: --column, --unit, --epoch-utc), its
+    telemetry as `dynprop estimate` reads it (on the filter grid, or at its own times),
+    whether it has a truth, and whether the telemetry is on the grid."""
     from ..run.estimate import estimate_inputs
     if not (run_dir / "scenario.yaml").is_file():
         raise TrimError(f"{run_dir}: not a run directory (no scenario.yaml)")
-    s = load_scenario(run_dir / "scenario.yaml")
+    s = load_scenario(run_dir / "scenario.yaml", list(overrides))
     path = telemetry_path(run_dir, telemetry)
     grid, _ = estimate_inputs(s, path)
-    if not grid.regular:
-        raise TrimError(off_grid_message(path, grid, s.sample_interval_s, "trim"))
-    return s, grid.columns, (run_dir / "truth.csv").is_file()
+    return s, grid.columns, (run_dir / "truth.csv").is_file(), grid.regular
 
 
 def _truth_solar(run_dir: Path, batch) -> tuple[np.ndarray, np.ndarray] | None:
@@ -206,7 +205,7 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
     out = stage / "verify"
     with staged_run_dir(out, label="") as vstage:
         stream_to_directory(new, vstage)
-    _, cols, _ = read_run(out, None)
+    _, cols, _, _ = read_run(out, None)    # the run just flown: on its grid
     after = estimate_kappa(new, cols, choose_batch(cols["t_s"], new.sample_interval_s,
                                                    r.batch.from_s, r.batch.to_s))
     result = {"before": _side(s, r, run_dir, truth), "after": _side(new, after, out, True),
@@ -218,15 +217,19 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
 
 
 def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = None,
-             telemetry: Path | None = None, do_verify: bool = False) -> dict:
-    """Everything `dynprop trim` does; returns the trim.json dictionary."""
+             telemetry: Path | None = None, do_verify: bool = False,
+             overrides=()) -> dict:
+    """Everything `dynprop trim` does; returns the trim.json dictionary.  ``overrides``
+    are scenario keys for reading the telemetry (`dynprop estimate`'s --column, --unit,
+    --epoch-utc)."""
     from ..figures.trim import trim_figure
     from ..files.rundir import staged_run_dir
     if (Path(run_dir) / "trim_loop.csv").is_file():
         raise TrimError(f"{run_dir}: this run moved its tab as it flew (trim.every_days, see "
                         "trim_loop.csv); dynprop trim needs a run flown at one tab setting")
-    s, cols, truth = read_run(run_dir, telemetry)
-    r = estimate_kappa(s, cols, choose_batch(cols["t_s"], s.sample_interval_s, from_s, to_s))
+    s, cols, truth, regular = read_run(run_dir, telemetry, overrides)
+    r = estimate_kappa(s, cols, choose_batch(cols["t_s"], s.sample_interval_s, from_s, to_s,
+                                             regular), regular=regular)
     d = report_dict(s, r, truth)
     # RUN_DIR/trim is trim's own, replaced each time (there is no --out to name).
     with staged_run_dir(run_dir / "trim", force=True, label="") as stage:

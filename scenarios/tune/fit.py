@@ -15,6 +15,7 @@ from dynprop.estimator.analysis.covariance_report import covariance_report
 from dynprop.estimator.kalman.consistency import chi2_bounds, whiteness
 from dynprop.estimator.linear.model import ProcessNoise
 from dynprop.estimator.linear.transition import discretize
+from dynprop.estimator.tuning.intervals import step_noise
 from dynprop.estimator.tuning.likelihood import NOISE_KEYS, Likelihood, noise_model
 from dynprop.estimator.tuning.maximum import (
     DETERMINED_SIGMA,
@@ -142,7 +143,8 @@ def diagnostics(lik: Likelihood, theta, src: TuneSource, noise: ProcessNoise,
                 roll_factor: float) -> Diagnostics:
     nu, S = lik.innovations(theta)
     e = nu / np.sqrt(S)
-    dt = src.scenario.sample_interval_s
+    # Off the grid, lags in samples at the median cadence (a gap's rows are not there).
+    dt = src.cadence_s
     lags = int(round(MAX_LAG_S / dt))
     nis, white, rho, hourly = {}, {}, {}, {}
     from dynprop.estimator.kalman.consistency import autocorrelation
@@ -158,12 +160,18 @@ def diagnostics(lik: Likelihood, theta, src: TuneSource, noise: ProcessNoise,
         white[kind] = whiteness(e[:, i], lags)
         rho[kind] = autocorrelation(e[:, i], lags)[0]
         sq = np.where(ok, e[:, i] ** 2, 0.0)
-        m = len(sq) // per_hour * per_hour
-        cnt = ok[:m].reshape(-1, per_hour).sum(axis=1)
+        if src.regular:
+            m = len(sq) // per_hour * per_hour
+            cnt = ok[:m].reshape(-1, per_hour).sum(axis=1)
+            total = sq[:m].reshape(-1, per_hour).sum(axis=1)
+        else:   # by the samples' own times: whole hours from the first sample
+            hour = ((src.t_s - src.t_s[0]) // 3600).astype(np.int64)
+            whole = hour < hour[-1] if hour[-1] > 0 else np.ones(len(hour), bool)
+            cnt = np.bincount(hour[whole], weights=ok[whole])
+            total = np.bincount(hour[whole], weights=sq[whole])
         with np.errstate(invalid="ignore", divide="ignore"):
             hourly[kind] = (np.arange(len(cnt)) + 0.5,
-                            np.where(cnt > 0, sq[:m].reshape(-1, per_hour).sum(axis=1) / cnt,
-                                     np.nan))
+                            np.where(cnt > 0, total / cnt, np.nan))
     ok = np.isfinite(nu)
     ll = -0.5 * float(np.sum(np.log(2 * np.pi * S[ok]) + nu[ok] ** 2 / S[ok]))
     return Diagnostics(ll, nis, white, rho, hourly, _sigma_yaw(src, noise, roll_factor))
@@ -218,11 +226,13 @@ COARSE_TOL = 0.5   # the coarse maximum need only be near: the full likelihood f
 def _likelihood(src: TuneSource, opts: TuneOptions, every: int) -> Likelihood:
     """The filter's likelihood of the telemetry, or of every ``every``-th sample with
     the filter stepping ``every`` samples at a time: the inputs ū held over a step are
-    the mean of its samples' (Eq. 31), a bridged dropout's noise density its mean."""
-    s = src.scenario
-    dt = s.sample_interval_s * every
+    the mean of its samples' (Eq. 31), a bridged dropout's noise density its mean.
+    Off the grid each step spans its own interval (to the ``every``-th sample after),
+    its Φ, Γ and unit Q_d evaluated once per distinct interval (``tuning.intervals``)."""
+    dt = src.cadence_s * every
     model = noise_model(src.params, dt, opts.groups(), src.noise, opts.roll_variance)
-    disc = discretize(src.params, src.noise, dt)
+    disc = (discretize(src.params, src.noise, dt) if src.regular else
+            step_noise(src.params, src.t_s[::every], opts.groups(), src.noise))
     meas, u, e = src.meas, src.u, src.bridge_noise
     if every > 1:
         n = len(meas.roll_rad)

@@ -1,7 +1,9 @@
 """The telemetry `dynprop tune` fits: a run directory's (its telemetry.csv, or the
 file a `dynprop estimate` directory names) or a telemetry file with ``--scenario``,
-on the filter's grid and turned into exactly what `dynprop estimate`'s filter
-reads (``bridge.inputs``); and why it may be too little to tune on."""
+on the filter's grid or off it (jittered tags, another cadence, gaps: each sample at
+its own time, as `dynprop estimate` reads it), turned into exactly what
+`dynprop estimate`'s filter reads (``bridge.inputs``); and why it may be too little
+to tune on."""
 
 from __future__ import annotations
 
@@ -31,7 +33,9 @@ class TuneError(ValueError):
 
 @dataclass(frozen=True)
 class TuneSource:
-    """The telemetry on the filter's grid as the filter reads it, with its scenario."""
+    """The telemetry as the filter reads it, with its scenario: on the scenario's grid
+    (``regular``, a row per step, NaN where missing) or each sample at its own time
+    ``t_s``, stepping over its own interval (``estimator.linear.steps``)."""
 
     scenario: Scenario
     telemetry: Path
@@ -45,19 +49,32 @@ class TuneSource:
     params: ModelParams
     noise: ProcessNoise
     stats: dict
+    regular: bool = True
 
     @property
     def span_s(self) -> float:
         return float(self.t_s[-1] - self.t_s[0])
 
+    @property
+    def cadence_s(self) -> float:
+        """The step between samples: the scenario's on its grid, else the median."""
+        if self.regular:
+            return self.scenario.sample_interval_s
+        return float(np.median(np.diff(self.t_s)))
+
     def measured_gap_s(self) -> float | None:
         """The mean length of the Sun gaps the telemetry shows (yaw outages of at
         least ``estimator.sun_gap_min_h``, both ends inside it), or None."""
-        from ..samples import sun_gaps
-        dt = self.scenario.sample_interval_s
-        gaps = sun_gaps(np.isfinite(self.meas.yaw_rad), dt,
-                        self.scenario.estimator.sun_gap_min_h)
-        lengths = [(b - a) * dt for a, b in gaps if 0 < a and b < len(self.t_s)]
+        from ..samples import sun_gaps, sun_gaps_at
+        present, min_h = np.isfinite(self.meas.yaw_rad), self.scenario.estimator.sun_gap_min_h
+        if self.regular:
+            dt = self.scenario.sample_interval_s
+            gaps = sun_gaps(present, dt, min_h)
+            lengths = [(b - a) * dt for a, b in gaps if 0 < a and b < len(self.t_s)]
+        else:   # the same length measured in time: last yaw before to first after, less a step
+            t, step = self.t_s, self.cadence_s
+            lengths = [t[b] - t[a - 1] - step for a, b in sun_gaps_at(present, t, min_h)
+                       if 0 < a and b < len(t)]
         return float(np.mean(lengths)) if lengths else None
 
     def gap_s(self) -> float:
@@ -78,7 +95,6 @@ def _run_telemetry(run_dir: Path) -> Path:
 def read_source(source: Path, scenario: str | Path | None = None,
                 overrides: list[str] = ()) -> TuneSource:
     """The telemetry of a run directory, or a telemetry file with its scenario."""
-    from ..files.telemetry_file import off_grid_message
     from ..run.estimate import estimate_inputs
     source = Path(source)
     if source.is_dir():
@@ -95,15 +111,15 @@ def read_source(source: Path, scenario: str | Path | None = None,
         run_dir, path = None, source
         s = load_scenario(scenario, list(overrides))
     grid, _ = estimate_inputs(s, path)
-    if not grid.regular:
-        raise TuneError(off_grid_message(path, grid, s.sample_interval_s, "tune"))
     cols = grid.columns
     params, noise = build.estimator_model(s)
-    inputs = prepared_inputs(s, params, *telemetry_inputs(s, cols))
+    # Off the grid, as `dynprop estimate`'s filter: N_w* and a dropout's noise per step.
+    inputs = prepared_inputs(s, params, *telemetry_inputs(s, cols),
+                             t_s=None if grid.regular else cols["t_s"])
     x0, P0 = initial_prior(s, params)
     return TuneSource(s, path, run_dir, cols["t_s"], inputs.measurements, inputs.u,
                       inputs.wheel_noise, x0, P0, params, noise,
-                      grid.stats(s.sample_interval_s))
+                      grid.stats(s.sample_interval_s), grid.regular)
 
 
 def source_problems(src: TuneSource, tuned: tuple[str, ...]) -> list[str]:

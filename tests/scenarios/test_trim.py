@@ -147,6 +147,47 @@ def test_a_short_batch_and_one_with_no_sunlit_time_exit_2(mistrimmed, capsys):
     assert (out / "trim" / "trim.json").read_bytes() == before   # nothing was touched
 
 
+def test_trim_on_jittered_telemetry_with_a_gap_recommends_the_tab_and_reads_columns(
+        mistrimmed, tmp_path):
+    """The mistrimmed run's telemetry as a ground system might deliver it: 1.0 s ± 20 ms
+    tags, a 2 h gap (``resample``: the sample nearest each tag), the roll column named
+    ES_ROLL and the wheels in rad/s, read with `estimate`'s --column and --unit (before
+    issue 43 trim had neither, and refused the file: "needs telemetry on the scenario's
+    grid").  Beside a copy of the run's scenario.yaml only (no truth), `trim` steps
+    each sample over its own interval and recommends a tab within its 3σ of the full
+    trim the scenario's own tab law gives, untrimmed / effectiveness = 5e-5 / 2.5e-6 =
+    20° (read from the YAML here, not from trim.json); σ stays near the grid's 0.03°.
+    Measured 19.9997° ± 0.030°.  ~3 s compiled."""
+    from .resample import resample
+    out, _, _ = mistrimmed
+    run = tmp_path / "run"
+    run.mkdir()
+    shutil.copy(out / "scenario.yaml", run)
+    cols = resample(out / "telemetry.csv", tmp_path / "j.csv", gap=(100800.0, 108000.0))
+    text = (tmp_path / "j.csv").read_text().splitlines()
+    header = text[0].split(",")
+    assert header[1] == "roll_deg" and header[4:6] == ["wheel1_rpm", "wheel2_rpm"]
+    header[1] = "ES_ROLL"
+    rows = [line.split(",") for line in text[1:]]
+    for r in rows:   # the wheels in rad/s
+        for j in (4, 5):
+            r[j] = repr(float(r[j]) * np.pi / 30)
+    (tmp_path / "renamed.csv").write_text("\n".join(
+        [",".join(header), *(",".join(r) for r in rows)]) + "\n")
+    rc, stdout, err = run_cli("trim", str(run), "--telemetry", str(tmp_path / "renamed.csv"),
+                              "--column", "roll=ES_ROLL", "--unit", "wheels=rad/s")
+    assert rc == 0, err
+    d = json.loads((run / "trim" / "trim.json").read_text())
+    solar = yaml.safe_load((out / "scenario.yaml").read_text())["environment"]["solar"]
+    full = solar["untrimmed_torque_Nm"] / solar["tab_effectiveness_Nm_per_deg"]
+    rec = d["recommendation"]
+    assert full == pytest.approx(20.0) and rec["move"]
+    assert abs(rec["trim_tab_deg_new"] - full) <= 3 * rec["sigma_deg"], rec
+    assert rec["sigma_deg"] <= 0.05
+    assert d["truth"] is None
+    assert d["batch"]["from_s"] >= cols["t_s"][0] and d["batch"]["to_s"] <= cols["t_s"][-1]
+
+
 def test_every_trim_json_key_is_documented(mistrimmed):
     from .test_outputs_doc import _spans, json_keys, undocumented
     _, d, _ = mistrimmed
