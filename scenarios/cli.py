@@ -156,17 +156,15 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_estimate(args) -> int:
+    from .commands import estimate_inputs_of
     from .files.rundir import check_out_dir, staged_run_dir
-    from .run.estimate import estimate_inputs, estimate_to_directory
+    from .run.estimate import estimate_to_directory
 
     # The telemetry, not the scenario's duration, sets how much is held in memory.
     scenario = load_with_overrides(args, streams=True)
     check_out_dir(args.out, args.force)
     start = time.perf_counter()
-    grid, truth = estimate_inputs(scenario, args.telemetry, args.truth)
-    # Absolute: a later `trim`/`tune` on this directory finds them from anywhere.
-    sources = {"file": str(Path(args.telemetry).resolve()),
-               "truth_file": None if args.truth is None else str(Path(args.truth).resolve())}
+    grid, truth, sources = estimate_inputs_of(scenario, args.telemetry, args.truth)
     with staged_run_dir(args.out, force=args.force) as stage:
         summary = estimate_to_directory(scenario, grid, truth, stage, sources)
         _note_tuned(args, stage / "summary.json")
