@@ -53,10 +53,12 @@ def load_with_overrides(args, streams: bool = False):
     A command that holds whole arrays (``streams=False``) refuses runs over 30 days."""
     from .config.loader import load_scenario
     overrides = _tuned(args)[0] + _telemetry_overrides(args) + list(args.set)
+    # Their messages name the option the user typed, not the key it sets.
     if args.seed is not None:
-        overrides.append(f"seed={args.seed}")
+        overrides.append((f"seed={args.seed}", shlex.join(["--seed", args.seed])))
     if args.duration_s is not None:
-        overrides.append(f"duration_s={args.duration_s}")
+        overrides.append((f"duration_s={args.duration_s}",
+                          shlex.join(["--duration-s", args.duration_s])))
     s = load_scenario(args.scenario, overrides)
     if not streams and s.duration_s > WHOLE_ARRAY_MAX_S:
         raise InputError(f"duration_s: {s.duration_s:g} s is over {WHOLE_ARRAY_MAX_S:g} s "
