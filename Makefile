@@ -12,7 +12,10 @@ DEMO_DIR ?= runs/demo-$(shell date -u +%Y%m%dT%H%M%SZ)
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	# setuptools' notice at every editable install (take care that a folder named like
+	# the package in the working directory may shadow it) is no warning about this
+	# project: the folder is the package's own source.
+	PYTHONWARNINGS='ignore:Editable installation' $(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
 venv: $(STAMP)
