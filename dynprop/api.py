@@ -167,6 +167,8 @@ def trim(source, from_s: float | None = None, to_s: float | None = None, telemet
 
     The CLI writes RUN_DIR/trim/; this leaves ``source`` untouched and writes the same
     files into the result's own directory (``save`` copies them)."""
+    from dynprop.scenarios.files.rundir import RunDirError
+    from dynprop.scenarios.trim.batch import TrimError
     from dynprop.scenarios.trim.report import run_trim
     run_dir = Path(getattr(source, "path", source))
     with _temporary("trim") as (owner, out):
@@ -177,8 +179,12 @@ def trim(source, from_s: float | None = None, to_s: float | None = None, telemet
             for p in run_dir.iterdir():
                 if p.name != "trim":
                     (out / p.name).symlink_to(p.resolve())
-        run_trim(out if run_dir.is_dir() else run_dir, from_s, to_s,
-                 None if telemetry is None else _file(telemetry, "telemetry.csv"), verify)
+        try:
+            run_trim(out if run_dir.is_dir() else run_dir, from_s, to_s,
+                     None if telemetry is None else _file(telemetry, "telemetry.csv"), verify)
+        except (ScenarioError, TrimError, RunDirError) as exc:
+            # The CLI's message, naming the user's directory rather than the links.
+            raise type(exc)(str(exc).replace(str(out), str(run_dir))) from None
     return TrimResult(out / "trim", owner)
 
 

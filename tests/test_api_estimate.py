@@ -13,6 +13,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import pytest
+
 import dynprop
 from dynprop.results import RunResult
 from tests.scenarios.test_cli_run import run_cli
@@ -58,6 +60,18 @@ def test_trim_writes_the_clis_trim_directory_and_leaves_the_run_alone(run6, tmp_
     assert t.verify.summary["duration_s"] == t.summary["batch"]["to_s"]
     t.save(tmp_path / "api")
     _same_files(tmp_path / "api", copy / "trim")
+
+
+def test_trim_refuses_with_the_clis_message_naming_the_users_directory(run6, tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    shutil.copy(run6 / "scenario.yaml", run)   # a run whose telemetry.csv is gone
+    rc, _, err = run_cli("trim", str(run))
+    assert rc == 2
+    with pytest.raises(ValueError) as info:
+        dynprop.trim(run)
+    assert err == f"dynprop: error: {info.value}\n"
+    assert not (run / "trim").exists()
 
 
 def _owned_copy(run6, tmp_path) -> RunResult:
