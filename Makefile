@@ -9,10 +9,13 @@ DEMO_DIR ?= runs/demo-$(shell date -u +%Y%m%dT%H%M%SZ)
 
 .PHONY: test test-vm demo bench lint docs venv clean
 
+# The install prints no warnings.  PYTHONWARNINGS silences only setuptools' notice at
+# every editable install (a folder named like the package in the working directory may
+# shadow it): here that folder is the package's own source.
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	PYTHONWARNINGS='ignore:Editable installation' $(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
 venv: $(STAMP)

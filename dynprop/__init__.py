@@ -17,17 +17,18 @@ from dynprop.scenarios import __version__
 # `dynprop.<package>` import, the command line's included, runs this file first,
 # and the facade's tables (pandas) and statistics would cost the CLI half a
 # second of start-up it never uses.
-_API = ("ExportError", "ScenarioError", "batch", "covariance", "export", "linearization",
-        "load_scenario", "montecarlo", "observability", "open_run", "report", "run", "simulate",
-        "tune")
-_RESULTS = ("BatchResult", "ExportResult", "LinearizationResult",
-            "MonteCarloResult", "RunResult", "SimulationResult", "TextReport", "TuneResult")
+_API = ("ExportError", "ScenarioError", "batch", "covariance", "estimate", "export",
+        "linearization", "load_scenario", "montecarlo", "observability", "open_run", "report",
+        "run", "simulate", "trim", "tune")
+_RESULTS = ("BatchResult", "ExportResult", "LinearizationResult", "MonteCarloResult",
+            "RunResult", "SimulationResult", "TextReport", "TrimResult", "TuneResult")
 
 __all__ = [  # noqa: F822 - defined by __getattr__ below
     "BatchResult", "ExportError", "ExportResult", "LinearizationResult", "MonteCarloResult",
-    "RunResult", "ScenarioError", "SimulationResult", "TextReport", "TuneResult",
-    "__version__", "batch", "covariance", "export", "linearization", "load_scenario",
-    "montecarlo", "observability", "open_run", "report", "run", "simulate", "tune",
+    "RunResult", "ScenarioError", "SimulationResult", "TextReport", "TrimResult", "TuneResult",
+    "__version__", "batch", "covariance", "estimate", "export", "linearization",
+    "load_scenario", "montecarlo", "observability", "open_run", "report", "run", "simulate",
+    "trim", "tune",
 ]
 
 

@@ -22,12 +22,14 @@ from .results import (
     RunResult,
     SimulationResult,
     TextReport,
+    TrimResult,
     TuneResult,
     export_directory,
 )
 
-__all__ = ["ExportError", "ScenarioError", "batch", "covariance", "export", "linearization",
-           "load_scenario", "montecarlo", "observability", "open_run", "run", "simulate", "tune"]
+__all__ = ["ExportError", "ScenarioError", "batch", "covariance", "estimate", "export",
+           "linearization", "load_scenario", "montecarlo", "observability", "open_run", "run",
+           "simulate", "trim", "tune"]
 
 
 def load_scenario(name_or_path: str | Path, set: dict | None = None, **overrides
@@ -97,6 +99,95 @@ def run(scenario: Scenario | str) -> RunResult:
     return RunResult(out, owner)
 
 
+def _file(source, name: str) -> Path:
+    """A file given as a path, or as a result (its directory's ``name``)."""
+    return Path(source.path) / name if hasattr(source, "path") else Path(source)
+
+
+def estimate(telemetry, scenario: Scenario | str | Path, truth=None, *,
+             columns: dict | None = None, units: dict | None = None,
+             epoch_utc: str | None = None, tuned_from=None, set: dict | None = None,
+             **overrides) -> RunResult:
+    """The filter and smoother on a telemetry file, as `dynprop estimate`: ``telemetry``
+    a file (or a result, its telemetry.csv), ``scenario`` a bundled name, a YAML file
+    or a ``Scenario``, ``truth`` a truth.csv or CCSDS AEM (or a result, its truth.csv)::
+
+        e = dynprop.estimate("pass.csv", "goes_next_equinox", columns={"roll": "ES_ROLL"},
+                             units={"roll": "urad"}, epoch_utc="2026-03-20T12:00:00Z")
+        e.estimate[["yaw_deg", "sigma_yaw_deg"]]; e.summary["warnings"]; e.save("runs/pass")
+
+    ``columns``, ``units``, ``epoch_utc`` and ``tuned_from`` are `estimate`'s
+    ``--column``, ``--unit``, ``--epoch-utc`` and ``--tuned-from``; ``set`` and the
+    keywords override scenario keys as in ``load_scenario`` (after them, as ``--set``).
+    ``save(DIR)`` writes byte for byte what `dynprop estimate ... --out DIR` writes."""
+    from dynprop.scenarios.commands import estimate_inputs_of
+    from dynprop.scenarios.files.rundir import staged_run_dir
+    from dynprop.scenarios.run.estimate import estimate_to_directory
+    items, note = [], None
+    if tuned_from is not None:
+        from dynprop.scenarios.tune.noise import tuned_noise
+        items, note = tuned_noise(Path(getattr(tuned_from, "path", tuned_from)))
+    # In the CLI's order: --tuned-from's, the telemetry keys, then --set's.
+    pairs = {**{f"telemetry.columns.{k}": v for k, v in (columns or {}).items()},
+             **{f"telemetry.units.{k}": v for k, v in (units or {}).items()},
+             **({} if epoch_utc is None else {"telemetry.epoch_utc": epoch_utc}),
+             **(set or {}), **overrides}
+    items += [f"{k}={json.dumps(v)}" for k, v in pairs.items()]
+    telemetry, truth = _file(telemetry, "telemetry.csv"), \
+        None if truth is None else _file(truth, "truth.csv")
+    with _temporary("estimate") as (owner, out):
+        if isinstance(scenario, Scenario):
+            if not items:
+                s = scenario
+            else:
+                # Its resolved YAML, overridden as the CLI would a file of it.
+                (owner / "scenario.yaml").write_text(str(scenario))
+                s = _load(owner / "scenario.yaml", items)
+        else:
+            s = _load(scenario, items)
+        grid, truth_rows, sources = estimate_inputs_of(s, telemetry, truth)
+        with staged_run_dir(out) as stage:
+            estimate_to_directory(s, grid, truth_rows, stage, sources)
+            if note is not None:
+                from dynprop.scenarios.tune.noise import note_summary
+                note_summary(stage / "summary.json", note)
+    return RunResult(out, owner)
+
+
+def trim(source, from_s: float | None = None, to_s: float | None = None, telemetry=None,
+         verify: bool = False) -> TrimResult:
+    """The solar trim-tab setting from the estimated torque, as `dynprop trim RUN_DIR`:
+    ``source`` a `run` or `estimate` directory (or its result), ``from_s``/``to_s`` the
+    batch's span (default: the whole telemetry), ``telemetry`` another file than the
+    run's, ``verify`` flies the recommended tab over the same span::
+
+        m = dynprop.run("goes_next_mistrimmed")
+        t = dynprop.trim(m, verify=True)
+        t.recommendation["trim_tab_deg_new"], t.verify.summary; t.save("runs/mis-trim")
+
+    The CLI writes RUN_DIR/trim/; this leaves ``source`` untouched and writes the same
+    files into the result's own directory (``save`` copies them)."""
+    from dynprop.scenarios.files.rundir import RunDirError
+    from dynprop.scenarios.trim.batch import TrimError
+    from dynprop.scenarios.trim.report import run_trim
+    run_dir = Path(getattr(source, "path", source))
+    with _temporary("trim") as (owner, out):
+        # The run seen through links to its files, so that `trim` writes its trim/
+        # beside them in the temporary directory, not into the user's run.
+        out.mkdir()
+        if run_dir.is_dir():
+            for p in run_dir.iterdir():
+                if p.name != "trim":
+                    (out / p.name).symlink_to(p.resolve())
+        try:
+            run_trim(out if run_dir.is_dir() else run_dir, from_s, to_s,
+                     None if telemetry is None else _file(telemetry, "telemetry.csv"), verify)
+        except (ScenarioError, TrimError, RunDirError) as exc:
+            # The CLI's message, naming the user's directory rather than the links.
+            raise type(exc)(str(exc).replace(str(out), str(run_dir))) from None
+    return TrimResult(out / "trim", owner)
+
+
 def report(path, yaw_requirement_deg: float | None = None) -> Path:
     """One self-contained HTML page of a directory the CLI (or ``save``) wrote, as
     `dynprop report DIR`: ``DIR/report.html``, returned.  ``path``: the directory, or
@@ -106,8 +197,11 @@ def report(path, yaw_requirement_deg: float | None = None) -> Path:
         dynprop.report("runs/eq", yaw_requirement_deg=0.1)   # runs/eq/report.html
 
     ``yaw_requirement_deg`` overrides the scenario's ``report.yaw_requirement_deg``."""
+    if hasattr(path, "report"):
+        # A result's page goes where the result was saved (``Result.report``).
+        return path.report(yaw_requirement_deg)
     from dynprop.scenarios.review.report import write_report
-    return write_report(Path(getattr(path, "path", path)), None, yaw_requirement_deg)
+    return write_report(Path(path), None, yaw_requirement_deg)
 
 
 def export(path, format: str = "aem", what: str = "estimate", frame: str = "inertial",

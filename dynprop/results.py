@@ -59,25 +59,37 @@ class _Directory:
     def __init__(self, path: Path, owner: Path | None = None):
         self.path = Path(path)
         self._owner = owner
+        # Where ``save`` last copied the files, and the ``report`` page asked for (its
+        # yaw requirement), so that the page goes where the files went.
+        self._saved: Path | None = None
+        self._page: tuple[float | None] | None = None
         if owner is not None:
             # The temporary directory goes with the object (or at exit), silently.
             weakref.finalize(self, shutil.rmtree, owner, True)
 
     def save(self, out: str | Path, force: bool = False) -> Path:
         """Copy every file to ``out``: byte for byte what the command writes there.
-        ``out`` must not exist unless ``force`` (then it is replaced whole)."""
+        ``out`` must not exist unless ``force`` (then it is replaced whole).  A page
+        ``report()`` made is written again there, naming ``out`` rather than the
+        temporary directory (its "reproduce with" line)."""
         from dynprop.scenarios.files.rundir import check_out_dir
+        from dynprop.scenarios.review.report import write_report
         out = Path(out)
         check_out_dir(out, force)
         with staged_run_dir(out, force=force) as stage:
             shutil.copytree(self.path, stage, dirs_exist_ok=True)
+            if self._page is not None:
+                write_report(stage, None, *self._page)
+        self._saved = out
         return out
 
     def report(self, yaw_requirement_deg: float | None = None) -> Path:
-        """The directory's review page, as `dynprop report`: report.html written into it
-        (``save`` then copies it too); returns its path."""
+        """The directory's review page, as `dynprop report`: report.html written into
+        the directory ``save`` last wrote (else into the result's own, and ``save``
+        writes it too); returns its path."""
         from dynprop.scenarios.review.report import write_report
-        return write_report(self.path, None, yaw_requirement_deg)
+        self._page = (yaw_requirement_deg,)
+        return write_report(self._saved or self.path, None, yaw_requirement_deg)
 
     def __repr__(self) -> str:
         where = "temporary" if self._owner is not None else str(self.path)
@@ -266,3 +278,35 @@ class BatchResult(_Directory):
     def figure(self):
         """batch.png as a matplotlib Figure (an image of the saved file)."""
         return _png_figure(self.path / "batch.png")
+
+
+class TrimResult(_Directory):
+    """`dynprop trim`: ``summary`` (trim.json's dict), ``recommendation`` (the tab to
+    command, ± σ), ``markdown`` (trim.md), ``figure()`` (trim.png), ``verify`` (the
+    flown check as a ``RunResult``, with ``verify=True``) and ``save(dir)``."""
+
+    @property
+    def summary(self) -> dict:
+        return json.loads((self.path / "trim.json").read_text())
+
+    @property
+    def recommendation(self) -> dict:
+        return self.summary["recommendation"]
+
+    @property
+    def markdown(self) -> str:
+        return (self.path / "trim.md").read_text()
+
+    @property
+    def verify(self) -> RunResult | None:
+        d = self.path / "verify"
+        if not (d / "summary.json").is_file():
+            return None
+        # Borrowed: the files are this result's, kept as long as the run is held.
+        run = RunResult(d)
+        run._parent = self
+        return run
+
+    def figure(self):
+        """trim.png as a matplotlib Figure (an image of the saved file)."""
+        return _png_figure(self.path / "trim.png")

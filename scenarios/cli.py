@@ -54,10 +54,12 @@ def load_with_overrides(args, streams: bool = False):
     A command that holds whole arrays (``streams=False``) refuses runs over 30 days."""
     from .config.loader import load_scenario
     overrides = _tuned(args)[0] + _telemetry_overrides(args) + list(args.set)
+    # Their messages name the option the user typed, not the key it sets.
     if args.seed is not None:
-        overrides.append(f"seed={args.seed}")
+        overrides.append((f"seed={args.seed}", shlex.join(["--seed", args.seed])))
     if args.duration_s is not None:
-        overrides.append(f"duration_s={args.duration_s}")
+        overrides.append((f"duration_s={args.duration_s}",
+                          shlex.join(["--duration-s", args.duration_s])))
     s = load_scenario(args.scenario, overrides)
     if not streams and s.duration_s > WHOLE_ARRAY_MAX_S:
         raise InputError(f"duration_s: {s.duration_s:g} s is over {WHOLE_ARRAY_MAX_S:g} s "
@@ -157,17 +159,15 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_estimate(args) -> int:
+    from .commands import estimate_inputs_of
     from .files.rundir import check_out_dir, staged_run_dir
-    from .run.estimate import estimate_inputs, estimate_to_directory
+    from .run.estimate import estimate_to_directory
 
     # The telemetry, not the scenario's duration, sets how much is held in memory.
     scenario = load_with_overrides(args, streams=True)
     check_out_dir(args.out, args.force)
     start = time.perf_counter()
-    grid, truth = estimate_inputs(scenario, args.telemetry, args.truth)
-    # Absolute: a later `trim`/`tune` on this directory finds them from anywhere.
-    sources = {"file": str(Path(args.telemetry).resolve()),
-               "truth_file": None if args.truth is None else str(Path(args.truth).resolve())}
+    grid, truth, sources = estimate_inputs_of(scenario, args.telemetry, args.truth)
     with staged_run_dir(args.out, force=args.force) as stage:
         summary = estimate_to_directory(scenario, grid, truth, stage, sources)
         _note_tuned(args, stage / "summary.json")

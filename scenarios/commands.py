@@ -38,3 +38,15 @@ def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = Non
         from .trim.loop import TrimSteering
         steering = TrimSteering(s)
     return stream_to_directory(s, stage, steering=steering)
+
+
+def estimate_inputs_of(s: Scenario, telemetry: Path, truth: Path | None):
+    """`dynprop estimate`'s reading, before anything is written: the telemetry on the
+    filter's grid, the truth at its samples (or None) and the ``sources`` that
+    summary.json names (``estimate_to_directory``'s last argument)."""
+    from .run.estimate import estimate_inputs
+    grid, truth_rows = estimate_inputs(s, telemetry, truth)
+    # Absolute: a later `trim`/`tune` on the directory finds them from anywhere.
+    sources = {"file": str(Path(telemetry).resolve()),
+               "truth_file": None if truth is None else str(Path(truth).resolve())}
+    return grid, truth_rows, sources

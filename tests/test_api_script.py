@@ -9,6 +9,7 @@ The API's workers must not, and it must leave nothing in the temporary directory
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
@@ -51,8 +52,16 @@ def test_the_readme_example_runs_once_as_a_script_and_leaves_no_temporary_files(
     assert proc.stdout.count(MARK) == 1, proc.stdout
     assert sorted(p.name for p in work.iterdir()) == ["example.py", "runs"]
     assert sorted(p.name for p in (work / "runs").iterdir()) == ["eq"]
-    assert (work / "runs" / "eq" / "summary.json").is_file()
+    saved = work / "runs" / "eq"
+    # r.report(), called after r.save(), put the page into the saved folder.
+    assert (saved / "report.html").is_file()
     assert sorted(p.name for p in tmp.iterdir()) == []
+    # The gap-end line prints the run's own figure: one Sun-gap end, judged within the
+    # filter's 3σ there (summary.json's own numbers).
+    summary = json.loads((saved / "summary.json").read_text())
+    errors, sigmas = summary["yaw_error_at_gap_end_deg"], summary["yaw_sigma_at_gap_end_deg"]
+    assert len(errors) == 1 and abs(errors[0]) < 3 * sigmas[0]
+    assert str(errors) in proc.stdout.splitlines()
 
 
 @pytest.mark.parametrize("call", [

@@ -19,7 +19,7 @@ from pydantic import BaseModel, ValidationError
 
 from .montecarlo import DISTRIBUTION_TAGS, Normal, Uniform
 from .schema import Scenario
-from .suggestions import cap_lines, did_you_mean, shown
+from .suggestions import cap_lines, closest, did_you_mean, shown
 
 
 class ScenarioError(ValueError):
@@ -105,9 +105,12 @@ def _read_source(source: str | Path) -> tuple[dict, str, str]:
     if not path.exists() and str(source) in bundled_names():
         path = bundled_dir() / f"{source}.yaml"
     if not path.is_file():
-        names = ", ".join(bundled_names())
-        raise ScenarioError(f"scenario {source}: no such file or bundled scenario "
-                            f"(bundled: {names})")
+        names = bundled_names()
+        # A bare name is a bundled one mistyped (goes_next_equinx): name the likely one.
+        match = closest(str(source), names) if len(path.parts) == 1 else None
+        hint = (f"did you mean '{match}'? (`dynprop scenarios` lists them)" if match
+                else f"bundled: {', '.join(names)}")
+        raise ScenarioError(f"scenario {source}: no such file or bundled scenario; {hint}")
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
@@ -120,15 +123,16 @@ def _read_source(source: str | Path) -> tuple[dict, str, str]:
     return raw, str(path), text
 
 
-def apply_override(raw: dict, assignment: str) -> None:
+def apply_override(raw: dict, assignment: str, origin: str | None = None) -> None:
     """Apply ``key.path=value`` in place; the value is read as YAML (``7``, ``true``,
-    ``[1, 2, 3]``, ``1e-6``), so types are checked like the file's."""
+    ``[1, 2, 3]``, ``1e-6``), so types are checked like the file's.  ``origin``: the
+    option that gave it, for messages (default ``--set key.path=value``)."""
     if "=" not in assignment:
-        raise ScenarioError(f"--set {assignment}: expected key.path=value")
+        raise ScenarioError(f"{origin or '--set ' + assignment}: expected key.path=value")
     path, text = assignment.split("=", 1)
     keys = path.strip().split(".")
     if not all(keys):
-        raise ScenarioError(f"--set {assignment}: empty key in {path!r}")
+        raise ScenarioError(f"{origin or '--set ' + assignment}: empty key in {path!r}")
     node = raw
     for i, key in enumerate(keys[:-1]):
         child = node.setdefault(key, {})
@@ -136,7 +140,7 @@ def apply_override(raw: dict, assignment: str) -> None:
             raise ScenarioError(f"{'.'.join(keys[:i + 1])}: is a value, cannot set "
                                 f"{path} inside it")
         node = child
-    node[keys[-1]] = _parse_yaml(text, f"--set {path}")
+    node[keys[-1]] = _parse_yaml(text, origin or f"--set {path}")
 
 
 def _union_label(part) -> bool:
@@ -169,17 +173,18 @@ def _model_at(loc: tuple) -> type[BaseModel] | None:
 @dataclass(frozen=True)
 class Sources:
     """Where each key's value came from, for messages: the scenario file (with the
-    line of each key) or a ``--set``, the later overrides winning."""
+    line of each key) or the option that overrode it (``--set key=value``,
+    ``--duration-s 600``), the later overrides winning."""
 
     path: str | None = None
     lines: dict[tuple, int] = field(default_factory=dict)
     overrides: tuple[tuple[tuple, str], ...] = ()
 
     def of(self, keys: tuple) -> str | None:
-        for set_keys, text in reversed(self.overrides):
+        for set_keys, origin in reversed(self.overrides):
             n = min(len(set_keys), len(keys))
             if set_keys[:n] == keys[:n]:
-                return f"--set {text}"
+                return origin
         if self.path is None:
             return None
         line = next((self.lines[keys[:k]] for k in range(len(keys), 0, -1)
@@ -351,7 +356,11 @@ def _tail(keys: tuple, echo: bool, raw, error: dict, sources: Sources | None) ->
     if error["type"] == "union_tag_invalid":
         value = (error.get("ctx") or {}).get("tag", value)
     exact_set = source is not None and source.startswith(f"--set {'.'.join(keys)}=")
-    got = f", got {shown(value)}" if echo and value is not _ABSENT and not exact_set else ""
+    # An option of its own (--duration-s 600) shows the value as given, as --set does.
+    own_option = source is not None and source.startswith("--") and not source.startswith(
+        "--set ")
+    got = f", got {shown(value)}" if (echo and value is not _ABSENT and not exact_set
+                                      and not own_option) else ""
     return got + (f" ({source})" if source else "")
 
 
@@ -368,18 +377,22 @@ def validate(raw: dict, sources: Sources | None = None) -> Scenario:
         raise ScenarioError(format_error(exc, raw, sources)) from None
 
 
-def load_scenario(source: str | Path, overrides: list[str] = ()) -> Scenario:
+def load_scenario(source: str | Path, overrides: list[str | tuple[str, str]] = ()
+                  ) -> Scenario:
     """The validated scenario with ``key.path=value`` overrides applied in order.
     Every problem of the file and of the overrides is reported together, each with
-    the value given and the file line or ``--set`` it came from."""
+    the value given and the file line or ``--set`` it came from.  An override may be
+    ``(key.path=value, origin)``: the option it came from (``--duration-s 600``),
+    named in its messages instead of ``--set``."""
     raw, path, text = _read_source(source)
     problems: list[str] = []
     applied = []
-    for assignment in overrides:
+    for item in overrides:
+        assignment, origin = item if isinstance(item, tuple) else (item, None)
         try:
-            apply_override(raw, assignment)
+            apply_override(raw, assignment, origin)
             applied.append((tuple(assignment.split("=", 1)[0].strip().split(".")),
-                            assignment))
+                            origin or f"--set {assignment}"))
         except ScenarioError as exc:
             problems += exc.problems
     try:

@@ -202,3 +202,28 @@ def test_closest_suggests_only_plausible_keys():
     assert closest("sampel_interval_s", keys) == "sample_interval_s"
     assert closest("banana", keys) is None
     assert closest("s", keys) is None
+
+
+def test_a_mistyped_scenario_name_names_the_bundled_one_it_meant(capsys, tmp_path):
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, "run", "goes_next_equinx", "--out", str(out))
+    assert rc == 2 and not out.exists()
+    [line] = error_lines(err)
+    # The name offered is a bundled file's (the package's own folder, read here).
+    bundled = {p.stem for p in (Path(__file__).parents[2] / "scenarios" / "bundled")
+               .glob("*.yaml")}
+    assert "goes_next_equinox" in bundled
+    assert line.startswith("scenario goes_next_equinx: ")
+    assert "did you mean 'goes_next_equinox'?" in line
+
+
+@pytest.mark.parametrize("value, what", [("-5", "greater than 0"), ("abc", "a number")])
+def test_a_bad_duration_s_names_the_option_as_typed(capsys, tmp_path, value, what):
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, "run", "goes_next_equinox", "--duration-s", value,
+                         "--out", str(out))
+    assert rc == 2 and not out.exists()
+    [line] = error_lines(err)
+    # The option the user typed, not a --set they never wrote.
+    assert f"(--duration-s {value})" in line and "--set" not in line
+    assert f"must be {what}" in line
