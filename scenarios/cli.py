@@ -232,6 +232,8 @@ def _cmd_trim(args) -> int:
     d = run_trim(args.run_dir, args.from_s, args.to_s, args.telemetry, args.verify,
                  _telemetry_overrides(args))
     print(one_line(d))
+    for line in d["warnings"]:
+        print(f"warning: {line}")
     print(f"{time.perf_counter() - start:.1f} s; wrote {args.run_dir}/trim/: trim.json, "
           "trim.md, trim.png" + (", verify/" if args.verify else ""))
     return 0
@@ -270,6 +272,8 @@ def _cmd_tune(args) -> int:
                       force=args.force or args.out is None,
                       command=shlex.join(["dynprop", *args.argv]))
     print(one_line(d))
+    for line in d["warnings"]:
+        print(f"warning: {line}")
     print(f"{time.perf_counter() - start:.1f} s; wrote {out}/: tune.json, tune.md, "
           "tuned_noise.yaml, tune.png")
     return 0

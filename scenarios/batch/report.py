@@ -135,11 +135,12 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
     d = {"scenario": s.name, "command": command, "model": model, "span_h": span_h,
          "overlap_h": overlap_h, "apriori": s.batch.apriori,
          "telemetry": {"file": str(src.telemetry.resolve()), "samples": n,
-                       "first_t_s": float(t[0]), "last_t_s": float(t[-1])},
+                       "first_t_s": float(t[0]), "last_t_s": float(t[-1]),
+                       "screened": None if grid.screen is None else grid.screen.summary()},
          "converged": all(sol.converged for sol in run.solutions),
          "not_converged": [sp.index for sp, sol in zip(run.spans, run.solutions, strict=True)
                            if not sol.converged],
-         "warnings": _warnings(run, span_h),
+         "warnings": _screen_lines(grid) + _warnings(run, span_h),
          "batches": _batch_entries(run, t, wn), "truth": None}
     sigmas = {"filter": real.sigma[rows][:, :N_STATES],
               "smoother": smoothed.sigma[rows][:, :N_STATES], "batch": sig_b}
@@ -182,6 +183,13 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
                          f"{s.name}: {model} batch, {span_h:g} h spans: estimates less "
                          "the batch's (no truth)", sig_c[:, [2, 0]] * RAD2DEG)
     return d, out
+
+
+def _screen_lines(grid) -> list[str]:
+    """The screen's warnings (``files.screen``), one per reason."""
+    from ..files.screen import screen_warnings
+    return [w["message"] for w in
+            screen_warnings(None if grid.screen is None else grid.screen.summary())]
 
 
 def _warnings(run: BatchRun, span_h: float) -> list[str]:

@@ -96,7 +96,8 @@ class GriddedTelemetry:
                 "median_cadence_s": float(np.median(steps)) if steps.size else None,
                 "cadence_s": cadence_s, "cadence_note": note,
                 "on_filter_grid": self.regular, "step_jitter_s": jitter,
-                "gaps_over_max_gap_h": gaps}
+                "gaps_over_max_gap_h": gaps,
+                "screened": None if self.screen is None else self.screen.summary()}
 
 
 def cadence_note(cadence_steps: int, dt_s: float) -> str | None:

@@ -216,8 +216,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     summary.update(output_interval_s=stride * step_s, telemetry_written=None,
                    daily=None)
     summary["telemetry"] = {**sources, **grid.stats(s.sample_interval_s),
-                            **_truth_section(truth, t, ends),
-                            "screened": None if grid.screen is None else grid.screen.summary()}
+                            **_truth_section(truth, t, ends)}
     if attitude_only(truth):
         # What needs the states an attitude history does not hold (rates, h, the
         # torque states: their errors, (e/σ)², NEES) is not tested, null.

@@ -52,7 +52,7 @@ def read_run(run_dir: Path, telemetry: Path | None, overrides=()):
     s = load_scenario(run_dir / "scenario.yaml", list(overrides))
     path = telemetry_path(run_dir, telemetry)
     grid, _ = estimate_inputs(s, path)
-    return s, grid.columns, (run_dir / "truth.csv").is_file(), grid.regular
+    return s, grid.columns, (run_dir / "truth.csv").is_file(), grid.regular, grid.screen
 
 
 def _truth_solar(run_dir: Path, batch) -> tuple[np.ndarray, np.ndarray] | None:
@@ -205,7 +205,7 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
     out = stage / "verify"
     with staged_run_dir(out, label="") as vstage:
         stream_to_directory(new, vstage)
-    _, cols, _, _ = read_run(out, None)    # the run just flown: on its grid
+    _, cols, _, _, _ = read_run(out, None)    # the run just flown: on its grid
     after = estimate_kappa(new, cols, choose_batch(cols["t_s"], new.sample_interval_s,
                                                    r.batch.from_s, r.batch.to_s))
     result = {"before": _side(s, r, run_dir, truth), "after": _side(new, after, out, True),
@@ -214,6 +214,11 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
         result["residual_fall"] = abs(result["before"]["kappa_true_Nm"]) \
             / abs(result["after"]["kappa_true_Nm"])
     return result
+
+
+def screen_warnings(screened):
+    from ..files.screen import screen_warnings as lines
+    return lines(screened)
 
 
 def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = None,
@@ -227,10 +232,12 @@ def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = No
     if (Path(run_dir) / "trim_loop.csv").is_file():
         raise TrimError(f"{run_dir}: this run moved its tab as it flew (trim.every_days, see "
                         "trim_loop.csv); dynprop trim needs a run flown at one tab setting")
-    s, cols, truth, regular = read_run(run_dir, telemetry, overrides)
+    s, cols, truth, regular, screened = read_run(run_dir, telemetry, overrides)
     r = estimate_kappa(s, cols, choose_batch(cols["t_s"], s.sample_interval_s, from_s, to_s,
                                              regular), regular=regular)
     d = report_dict(s, r, truth)
+    d["screened"] = None if screened is None else screened.summary()
+    d["warnings"] = [w["message"] for w in screen_warnings(d["screened"])]
     # RUN_DIR/trim is trim's own, replaced each time (there is no --out to name).
     with staged_run_dir(run_dir / "trim", force=True, label="") as stage:
         if do_verify:
