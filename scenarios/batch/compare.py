@@ -1,10 +1,11 @@
 """The batch, the filter and the filter plus smoother against the truth, at the
 samples the truth has (a run's truth.csv: every ``output.interval_s``).
 
-A Sun gap's end is judged at the last truth sample inside the gap, before the Sun
-sensor's yaw returns: the yaw error the gap left, which is what the paper's
-σ_yaw = 0.040° (Eq. 55) describes for the filter.  Every estimator is judged at
-that same sample.
+A Sun gap's end is judged by the one rule every command uses (docs/outputs.md, "Where
+a Sun-gap end is judged"; ``run.estimate_truth.gap_end_rows``): at the sample where the
+Sun sensor's yaw returns, or, with a coarser truth, at the last truth sample inside the
+gap while the filter's σ there is within 1% of its σ at the end.  Every estimator is
+judged at that same sample, and batch.json says which it was.
 """
 
 from __future__ import annotations
@@ -14,28 +15,17 @@ import numpy as np
 from ..units import RAD2DEG
 
 
-def judged_rows(gaps, rows: np.ndarray) -> list[tuple[int, int | None]]:
-    """For each gap (a, b) that ends inside the record: b, and the last truth row r
-    with a ≤ r < b (None when the truth has no sample inside the gap)."""
-    out = []
-    for a, b in gaps:
-        i = int(np.searchsorted(rows, b)) - 1
-        r = int(rows[i]) if i >= 0 and rows[i] >= a else None
-        out.append((int(b), r))
-    return out
-
-
 def _rms(e) -> float | None:
     e = np.asarray(e)[np.isfinite(e)]
     return float(np.sqrt(np.mean(e**2))) if e.size else None
 
 
-def compare(t_s, rows: np.ndarray, truth_model: np.ndarray, estimators: dict, gaps,
+def compare(t_s, rows: np.ndarray, truth_model: np.ndarray, estimators: dict, ends,
             consider_sigma: np.ndarray | None = None) -> dict:
     """batch.json's ``truth`` section: per estimator (name → (x, σ) at ``rows``), the
     roll and yaw RMS errors and each gap end's yaw error, σ and whether it is within
-    3σ; for the batch also its consider σ there (``consider_sigma`` at ``rows``)."""
-    ends = judged_rows(gaps, rows)
+    3σ, judged at the row ``ends`` gives (``gap_end_rows``: (b, row or None)); for the
+    batch also its consider σ there (``consider_sigma`` at ``rows``)."""
     pos = {int(r): i for i, r in enumerate(rows)}
     out = {"compared_rows": int(len(rows)),
            "gap_end_t_s": [float(t_s[b]) for b, _ in ends],

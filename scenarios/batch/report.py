@@ -20,6 +20,7 @@ from ..config import build
 from ..config.schema import output_stride
 from ..files.columns import STATE_COLUMNS, display_factors, estimate_columns
 from ..files.csvio import write_csv
+from ..run.estimate_truth import gap_end_rows
 from ..run.filtering import design_of, paper_smoother
 from ..run.whole import filter_telemetry
 from ..samples import output_rows, sun_gaps, sun_gaps_at
@@ -121,7 +122,8 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
     stride = output_stride(s) if grid.regular else max(1, round(dt * output_stride(s) / step_s))
     k = output_rows(0, n, stride)
     truth_rows = np.zeros(0, dtype=np.int64) if src.truth is None else src.truth.rows
-    rows = np.union1d(k, truth_rows).astype(np.int64)
+    # The gap ends too: batch.json gives each one's estimates with or without a truth.
+    rows = np.union1d(np.union1d(k, truth_rows), [b for _, b in gaps]).astype(np.int64)
     run = solve_spans(s, tel, None if pitch is None else pitch * DEG, rows, t, model, span_h,
                       overlap_h, on_grid=grid.regular)
     params, noise = build.estimator_model(s)
@@ -141,7 +143,9 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
          "not_converged": [sp.index for sp, sol in zip(run.spans, run.solutions, strict=True)
                            if not sol.converged],
          "warnings": _screen_lines(grid) + _warnings(run, span_h),
-         "batches": _batch_entries(run, t, wn), "truth": None}
+         "batches": _batch_entries(run, t, wn),
+         "gap_ends": _gap_ends(t, gaps, rows, run.x, sig_b, real),
+         "truth": None}
     sigmas = {"filter": real.sigma[rows][:, :N_STATES],
               "smoother": smoothed.sigma[rows][:, :N_STATES], "batch": sig_b}
     estimates = {"filter": real.x[rows][:, :N_STATES],
@@ -153,7 +157,7 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
         at = np.searchsorted(rows, truth_rows)
         d["truth"] = compare(t, truth_rows, tm,
                              {name: (x[at], sigmas[name][at]) for name, x in estimates.items()},
-                             gaps, sig_c[at])
+                             gap_end_rows(gaps, truth_rows, real.sigma[:, 2], n), sig_c[at])
         errors = {name: (x[at] - tm)[:, [2, 0]] * RAD2DEG for name, x in estimates.items()}
     columns = estimate_columns(t[k], run.x[k], sig_b[at_k], wn)
     consider = estimate_columns(t[k], run.x[k], sig_c[at_k], wn)
@@ -183,6 +187,24 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
                          f"{s.name}: {model} batch, {span_h:g} h spans: estimates less "
                          "the batch's (no truth)", sig_c[:, [2, 0]] * RAD2DEG)
     return d, out
+
+
+def _gap_ends(t, gaps, rows, x_batch, sig_batch, real) -> list[dict]:
+    """Each Sun-gap end's yaw (at the sample the Sun sensor's yaw returns): the batch's
+    and the filter's, their σ and the batch's less the filter's, truth or none."""
+    out = []
+    for _, b in gaps:
+        i = int(np.searchsorted(rows, b))
+        yb, sb = x_batch[b, 2] * RAD2DEG, sig_batch[i, 2] * RAD2DEG
+        yf, sf = real.x[b, 2] * RAD2DEG, real.sigma[b, 2] * RAD2DEG
+        out.append({"t_s": float(t[b]), "batch_yaw_deg": _finite(yb),
+                    "batch_sigma_deg": _finite(sb), "filter_yaw_deg": float(yf),
+                    "filter_sigma_deg": float(sf), "batch_minus_filter_deg": _finite(yb - yf)})
+    return out
+
+
+def _finite(v) -> float | None:
+    return float(v) if np.isfinite(v) else None
 
 
 def _screen_lines(grid) -> list[str]:
@@ -215,6 +237,13 @@ def one_line(d: dict) -> str:
     its = [b["iterations"] for b in d["batches"]]
     parts.append("converged in " + ", ".join(map(str, its)) + " iteration(s)"
                  if d["converged"] else f"NOT converged: batch(es) {d['not_converged']}")
+    for g in d.get("gap_ends", ()):
+        if g["batch_yaw_deg"] is None:
+            continue
+        parts.append(f"gap end {g['t_s'] / 3600:.2f} h: batch yaw {g['batch_yaw_deg']:+.4f} "
+                     f"± {g['batch_sigma_deg']:.4f} deg, filter {g['filter_yaw_deg']:+.4f} "
+                     f"± {g['filter_sigma_deg']:.4f}, batch − filter "
+                     f"{g['batch_minus_filter_deg']:+.4f}")
     tr = d["truth"]
     if tr is not None and tr["gap_end_t_s"]:
         for name in ("filter", "smoother", "batch"):

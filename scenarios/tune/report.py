@@ -192,5 +192,8 @@ def one_line(d: dict) -> str:
             parts.append(f"{k} {'<' if e['limit_side'] == 'upper' else '>'} "
                          f"{e['limit_95']:.1e}")
     sb, sa = d["before"]["sigma_yaw_deg"], d["after"]["sigma_yaw_deg"]
-    return (f"{d['scenario']}: " + "; ".join(parts) + f"; gap-end sigma_yaw "
-            f"{sb['gap_end']:.4f} -> {sa['gap_end']:.4f} deg")
+    # The periodic steady state's (every day's gap alike), not a run's own gap ends,
+    # which start from the filter's prior and differ: say which.
+    return (f"{d['scenario']}: " + "; ".join(parts) + f"; steady-state gap-end sigma_yaw "
+            f"{sb['gap_end']:.4f} -> {sa['gap_end']:.4f} deg (periodic covariance, "
+            f"{d['telemetry']['sun_gap_h']:.2f} h gap)")
