@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 import pytest
+
 from scenarios.files.csvio import read_csv
 
 from .mc_helpers import run_cli
