@@ -273,6 +273,26 @@ def filter_jitter_s_per_day() -> float:
                                              x0, P0), repeats=3)
 
 
+def screen_s_per_day() -> float:
+    """Issue 43: the telemetry screen (``scenarios.files.screen``) over one day of
+    0.512 s telemetry.csv columns: roll, pitch, yaw, two wheels and the three heads'
+    raw angles, noisy and clean (nothing screened, so every rule runs in full)."""
+    from dynprop.scenarios.files.screen import screen
+    s = load_scenario("goes_next_equinox", ["duration_s=86400"])
+    n = 168_750
+    rng = np.random.default_rng(4)
+    cols = {"t_s": np.arange(n) * 0.512, "roll_deg": np.round(rng.normal(0, 0.01, n), 2),
+            "pitch_deg": np.round(rng.normal(0, 0.01, n), 2),
+            "yaw_deg": rng.normal(0, 0.04, n), "yaw_sigma_deg": np.full(n, 0.04),
+            "sun_head": np.zeros(n),
+            **{f"wheel{i}_rpm": 5485 + np.round(rng.normal(0, 0.03, n), 4) for i in (1, 2)},
+            **{f"{h}_{a}_deg": rng.uniform(-30, 30, n) for h in ("dss", "cass1", "cass2")
+               for a in ("alpha", "beta")}}
+    out, rep = screen(cols, {}, s)
+    assert rep.count == 0 and out is cols
+    return median_time(lambda: screen(cols, {}, s), repeats=5)
+
+
 def ekf_over_filter() -> float:
     """ekf_s_per_day / filter_s_per_day, each the median of 7 one-day runs on the same
     synthetic day, taken in turn (issue 16's target: ≤ 4)."""
@@ -384,6 +404,7 @@ def main() -> None:
                                            repeats=5), "s")
     # Issue 30: the same day with ±50 ms jitter on every tag (each step its own Φ, Γ, Q_d).
     report("filter_jitter_s_per_day", filter_jitter_s_per_day(), "s")
+    report("screen_s_per_day", screen_s_per_day(), "s")
     # Issue 16: the extended Kalman filter on the same day, pitch measured like roll;
     # its target is a ratio to filter_s_per_day of the same bench run (≤ 4×).
     from dynprop.estimator.ekf.filter import EkfInputs, ekf_filter
