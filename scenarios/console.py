@@ -74,6 +74,12 @@ def estimate_lines(name: str, summary: dict, step_s: float, seconds: float) -> l
         lines.append(f"errors on the {tel['compared_rows']} samples the truth has a row "
                      f"for{every}: yaw error RMS {summary['yaw_error_rms_deg']:.4f} deg; "
                      f"{_gap_ends(summary)}; {_nees(summary['checks']['nees'])}; {eq55}")
+        judged = [t for t in tel.get("gap_end_compared_at_s") or () if t is not None]
+        if judged and tel["compared_rows"] < tel["filter_steps"]:
+            # A truth coarser than the telemetry: say which sample each end was judged at.
+            lines.append("the truth is coarser than the telemetry: Sun-gap ends judged at "
+                         "the last truth row inside each gap, t = "
+                         + ", ".join(f"{t:.3f}" for t in judged) + " s (docs/outputs.md)")
         lines += _ekf_line(summary)
     lines += _pitch_line(summary)
     lines += _bias_and_gate(summary)

@@ -245,6 +245,11 @@ def one_line(d: dict) -> str:
                      f"± {g['filter_sigma_deg']:.4f}, batch − filter "
                      f"{g['batch_minus_filter_deg']:+.4f}")
     tr = d["truth"]
+    if tr is not None and tr["gap_end_judged_at_t_s"] != tr["gap_end_t_s"]:
+        parts.append("gap ends judged at the truth's t = " + ", ".join(
+            "not tested" if t is None else f"{t:.3f}" for t in tr["gap_end_judged_at_t_s"])
+            + " s (the ends are at " + ", ".join(f"{t:.3f}" for t in tr["gap_end_t_s"])
+            + " s)")
     if tr is not None and tr["gap_end_t_s"]:
         for name in ("filter", "smoother", "batch"):
             ends = [g["error_deg"] for g in tr[name]["gap_ends"] if g["error_deg"] is not None]

@@ -74,3 +74,32 @@ def test_batch_gives_each_gap_ends_yaw_and_its_difference_from_the_filter(full_r
     assert g["filter_sigma_deg"] == pytest.approx(est["sigma_yaw_deg"][k], rel=1e-9)
     assert f"batch yaw {g['batch_yaw_deg']:+.4f} ± {g['batch_sigma_deg']:.4f}" in batch_out
     assert f"batch − filter {g['batch_minus_filter_deg']:+.4f}" in batch_out
+
+
+def test_coarse_truth_each_command_says_the_sample_it_judged(gap_run, tmp_path):
+    """The same run's truth every 64 s (as a run writes it by default): `estimate
+    --truth` and `batch --truth` judge each gap end at the same truth row, the last
+    inside the gap before the end, and both print it."""
+    lines = (gap_run / "truth.csv").read_text().splitlines(keepends=True)
+    body = [x for x in lines if not x.startswith("#")]
+    header, rows = body[0], body[1:]
+    coarse = tmp_path / "truth64.csv"
+    coarse.write_text("".join(x for x in lines if x.startswith("#")) + header
+                      + "".join(rows[::125]))          # 125 × 0.512 s = 64 s
+    rc, est_out, err = run_cli("estimate", gap_run / "telemetry.csv", "--scenario",
+                               gap_run / "scenario.yaml", "--truth", coarse,
+                               "--out", tmp_path / "est")
+    assert rc == 0, err
+    rc, batch_out, err = run_cli("batch", gap_run / "telemetry.csv", "--scenario",
+                                 gap_run / "scenario.yaml", "--truth", coarse, "--model",
+                                 "linear", "--span-h", "13", "--out", tmp_path / "batch")
+    assert rc in (0, 1), err
+    est = json.loads((tmp_path / "est" / "summary.json").read_text())["telemetry"]
+    tr = json.loads((tmp_path / "batch" / "batch.json").read_text())["truth"]
+    truth_t = read_csv(coarse)["t_s"]
+    (end,) = tr["gap_end_t_s"]
+    expected = float(truth_t[truth_t < end].max())       # the last truth row before it
+    assert est["gap_end_compared_at_s"] == [expected]
+    assert tr["gap_end_judged_at_t_s"] == [expected]
+    assert f"t = {expected:.3f} s" in est_out
+    assert f"judged at the truth's t = {expected:.3f} s" in batch_out
