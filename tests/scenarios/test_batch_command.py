@@ -39,7 +39,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 STATES = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms", "N_px_Nm",
           "N_pz_Nm", "N_cx_Nm", "N_cz_Nm")
 TOP_KEYS = {"scenario", "command", "model", "span_h", "overlap_h", "apriori", "telemetry",
-            "converged", "not_converged", "warnings", "batches", "truth"}
+            "converged", "not_converged", "warnings", "batches", "gap_ends", "truth"}
 BATCH_KEYS = {"index", "epoch_s", "span_s", "samples", "measurements", "a_priori",
               "converged", "iterations", "cost", "cost_per_measurement", "residual_rms",
               "residual_rms_over_sigma", "fixed_states", "message", "overlap", "state", "sigma",
@@ -174,7 +174,9 @@ def test_batch_json_holds_every_key_and_counts_the_telemetry(batches, run, telem
                                        *extra])
     t = telemetry["t_s"]
     assert d["telemetry"] == {"file": str((run / "telemetry.csv").resolve()),
-                              "samples": len(t), "first_t_s": 0.0, "last_t_s": float(DAY_S)}
+                              "samples": len(t), "first_t_s": 0.0, "last_t_s": float(DAY_S),
+                              "screened": d["telemetry"]["screened"]}
+    assert d["telemetry"]["screened"]["values"] == 0      # a run's own telemetry is clean
     assert d["converged"] is True and d["not_converged"] == [] and d["warnings"] == []
     (b,) = d["batches"]
     assert set(b) == BATCH_KEYS
