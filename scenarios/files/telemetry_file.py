@@ -253,13 +253,3 @@ def on_grid(cols: dict[str, np.ndarray], dt_s: float, max_gap_s: float,
     rows = np.full(n, -1, dtype=np.int64)
     rows[index] = np.arange(len(t))
     return GriddedTelemetry(gridded, rows, len(t), None, max_gap_s, report)
-
-
-def off_grid_message(path, grid: GriddedTelemetry, dt_s: float, command: str) -> str:
-    """One line for a command that needs the grid (`tune`, `trim`: their compiled
-    passes step at one Δt) given telemetry at its own times."""
-    cadence = float(np.median(grid.steps[:-1])) if len(grid.steps) > 1 else dt_s
-    return (f"{path}: `dynprop {command}` needs telemetry on the scenario's grid of "
-            f"sample_interval_s = {dt_s:g} s, and these rows are at their own times "
-            f"(cadence {cadence:g} s): set sample_interval_s to a cadence the tags keep "
-            "(--set sample_interval_s=...), or use `dynprop estimate`, which takes any")
