@@ -43,6 +43,7 @@ REASONS = {
     "jump": "a jump from the neighbouring readings faster than the attitude or wheel can move",
 }
 FIRST = 5          # rows listed per column in summary.json and the warning
+ANGLE_UNITS = {"deg": 1.0, "rad": RAD2DEG, "urad": 1e-6 * RAD2DEG}   # to degrees
 HEAD_NAMES = ("dss", "cass1", "cass2")   # telemetry.csv's sun_head codes 0, 1, 2
 
 
@@ -273,7 +274,8 @@ def unit_problems(path, cols: dict[str, np.ndarray], s, names: dict[str, str]) -
     """A line per column whose values are a unit's factor away from what the scenario's
     spacecraft reads: wheel speeds 2π/60 (rad/s read as rpm) or 60/2π from each wheel's
     nominal speed; roll or pitch whose sample-to-sample scatter is 180/π or π/180 (or
-    1e6 times that) from the Earth sensor's noise and quantum.  Within a factor of
+    1e6 times that) from the Earth sensor's noise and quantum, a yaw likewise from the
+    coarse Sun sensors' noise.  Within a factor of
     2 (wheels) or 3 (angles) of the factor, which no physical scatter reaches."""
     problems = []
     sc = build.build_spacecraft(s)
@@ -295,29 +297,38 @@ def unit_problems(path, cols: dict[str, np.ndarray], s, names: dict[str, str]) -
                     f"{given}, {ratio:.4f} × the wheel's nominal {nominal:.5g} rpm: the "
                     f"file's wheel speeds look like {unit}, not {given} (--unit "
                     f"wheels={unit})")
-    e = s.sensors.earth
-    expected = np.hypot(e.noise_deg, e.quantum_deg / np.sqrt(12))
-    for key, name in (("roll", "roll_deg"), ("pitch", "pitch_deg")):
+    e, cass = s.sensors.earth, s.sensors.sun.cass1
+    earth = (np.hypot(e.noise_deg, e.quantum_deg / np.sqrt(12)), "the Earth sensor's")
+    head = cols.get("sun_head")
+    for key, name in (("roll", "roll_deg"), ("pitch", "pitch_deg"), ("yaw", "yaw_deg")):
         v = cols.get(name)
-        if v is None or expected == 0:
+        if v is None:
             continue
         d = np.diff(v)
+        expected, whose = earth
+        if key == "yaw":
+            # The coarse heads' yaw is white at about their 1° (the digital head's is
+            # quantised and slowly varying, its sample-to-sample scatter far below its
+            # σ): judge the yaw on consecutive CASS readings when the file says which.
+            expected, whose = cass.noise_deg, "the coarse Sun sensors'"
+            if head is not None:
+                d = d[(head[:-1] >= 1) & (head[1:] == head[:-1])]
         d = d[np.isfinite(d)]
-        if d.size < 10:
+        if d.size < 10 or expected == 0:
             continue
         scatter = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2)
         if scatter == 0:
             continue
         ratio = scatter / expected
         declared = getattr(s.telemetry.units, key)
-        for unit, to_deg in (("deg", 1.0), ("rad", RAD2DEG), ("urad", 1e-6 * RAD2DEG)):
-            given = {"deg": 1.0, "rad": RAD2DEG, "urad": 1e-6 * RAD2DEG}[declared]
+        given = ANGLE_UNITS[declared]
+        for unit, to_deg in ANGLE_UNITS.items():
             if unit != declared and abs(np.log(ratio / (given / to_deg))) < np.log(3):
                 problems.append(
                     f"{path}: {names.get(name, name)} scatters {scatter:.3g}° from sample "
-                    f"to sample read as {declared}, {ratio:.3g} × the Earth sensor's "
-                    f"{expected:.3g}° of noise and quantum: the file's {key} looks like "
-                    f"{unit}, not {declared} (--unit {key}={unit})")
+                    f"to sample read as {declared}, {ratio:.3g} × {whose} "
+                    f"{expected:.3g}° of noise: the file's {key} looks like {unit}, not "
+                    f"{declared} (--unit {key}={unit})")
     return problems
 
 

@@ -230,11 +230,36 @@ def test_a_file_in_rad_and_rad_per_s_without_unit_is_refused(run6, in_radians, t
     for column, unit, option in (("wheel1_rpm", "rad/s", "--unit wheels=rad/s"),
                                  ("wheel2_rpm", "rad/s", "--unit wheels=rad/s"),
                                  ("roll_deg", "rad", "--unit roll=rad"),
-                                 ("pitch_deg", "rad", "--unit pitch=rad")):
+                                 ("pitch_deg", "rad", "--unit pitch=rad"),
+                                 ("yaw_deg", "rad", "--unit yaw=rad")):
         (line,) = [x for x in lines if f" {column} " in x]
         assert f"look like {unit}," in line or f"looks like {unit}," in line, line
         assert option in line, line
-    assert len(lines) == 4
+    assert len(lines) == 5
+
+
+def test_a_yaw_alone_in_rad_is_refused(run6, tmp_path):
+    """Only the yaw columns in rad: its scatter on consecutive coarse-sensor readings is
+    π/180 of the CASS's 1° noise.  The filter would otherwise take it (yaw NIS 0.78,
+    which looks normal, and a yaw error RMS that falls from 0.023° to 0.003°)."""
+    lines = (run6 / "telemetry.csv").read_text().splitlines()
+    k = next(i for i, x in enumerate(lines) if not x.startswith("#"))
+    names = lines[k].split(",")
+    cols = [names.index("yaw_deg"), names.index("yaw_sigma_deg")]
+    rows = []
+    for x in lines[k + 1:]:
+        f = x.split(",")
+        for j in cols:
+            f[j] = repr(float(f[j]) * np.pi / 180) if f[j] else ""
+        rows.append(",".join(f))
+    path = tmp_path / "yaw_rad.csv"
+    path.write_text("\n".join(lines[:k + 1] + rows) + "\n")
+    out = tmp_path / "est"
+    rc, _, err = run_cli("estimate", str(path), "--scenario", str(run6 / "scenario.yaml"),
+                         "--out", str(out))
+    assert rc == 2 and "Traceback" not in err and not out.exists()
+    (line,) = err.strip().splitlines()
+    assert " yaw_deg " in line and "looks like rad," in line and "--unit yaw=rad" in line
 
 
 def test_the_same_file_with_its_units_reads_as_the_original(run6, in_radians):
