@@ -22,7 +22,7 @@ PAGE_UNIT = {"deg": "°", "deg/s": "°/s", "N m/deg": "N m/°", "N m": "N m", "N
 # so that the rest is checked.
 UNIT_NOT_IN_NAME = {"trim_tab_deg_new", "trim_tab_deg_end", "seconds",
                     "estimator.process_noise.q_x", "estimator.process_noise.q_z",
-                    "estimator.process_noise.q_w"}
+                    "estimator.process_noise.q_w", "estimator.process_noise.q_y"}
 _UNIT = "|".join(re.escape(u) for u in sorted(PAGE_UNIT, key=len, reverse=True))
 
 
