@@ -229,15 +229,34 @@ class TextReport:
         return self.text
 
 
-class TuneResult(_Directory):
+class _Report(_Directory):
+    """A command's directory of one JSON report, an optional markdown page and one
+    figure (``JSON``, ``MD``, ``PNG``, the file names)."""
+
+    JSON = MD = PNG = ""
+
+    @property
+    def summary(self) -> dict:
+        return json.loads((self.path / self.JSON).read_text())
+
+    @property
+    def markdown(self) -> str:
+        if not self.MD:
+            raise AttributeError(f"{type(self).__name__} has no markdown page")
+        return (self.path / self.MD).read_text()
+
+    def figure(self):
+        """The command's figure as a matplotlib Figure (an image of the saved file)."""
+        return _png_figure(self.path / self.PNG)
+
+
+class TuneResult(_Report):
     """`dynprop tune`: ``summary`` (tune.json's dict), ``estimated`` (each tuned
     ``estimator.process_noise`` key: value, σ, status, limit, the value used),
     ``overrides`` (the tuned noise as ``load_scenario(set=...)`` takes it),
     ``markdown`` (tune.md), ``figure()`` (tune.png) and ``save(dir)``."""
 
-    @property
-    def summary(self) -> dict:
-        return json.loads((self.path / "tune.json").read_text())
+    JSON, MD, PNG = "tune.json", "tune.md", "tune.png"
 
     @property
     def estimated(self) -> dict:
@@ -248,24 +267,14 @@ class TuneResult(_Directory):
         return {f"estimator.process_noise.{k}": v
                 for k, v in self.summary["tuned_process_noise"].items()}
 
-    @property
-    def markdown(self) -> str:
-        return (self.path / "tune.md").read_text()
 
-    def figure(self):
-        """tune.png as a matplotlib Figure (an image of the saved file)."""
-        return _png_figure(self.path / "tune.png")
-
-
-class BatchResult(_Directory):
+class BatchResult(_Report):
     """`dynprop batch`: ``summary`` (batch.json's dict), ``batches`` (one dict per batch:
     epoch, converged, iterations, cost, residuals, state, σ and consider σ),
     ``estimate`` (estimate_batch.csv as a DataFrame indexed by t_s), ``figure()``
     (batch.png) and ``save(dir)``."""
 
-    @property
-    def summary(self) -> dict:
-        return json.loads((self.path / "batch.json").read_text())
+    JSON, PNG = "batch.json", "batch.png"
 
     @property
     def batches(self) -> list[dict]:
@@ -275,27 +284,17 @@ class BatchResult(_Directory):
     def estimate(self) -> pd.DataFrame:
         return _table(self.path / "estimate_batch.csv")
 
-    def figure(self):
-        """batch.png as a matplotlib Figure (an image of the saved file)."""
-        return _png_figure(self.path / "batch.png")
 
-
-class TrimResult(_Directory):
+class TrimResult(_Report):
     """`dynprop trim`: ``summary`` (trim.json's dict), ``recommendation`` (the tab to
     command, ± σ), ``markdown`` (trim.md), ``figure()`` (trim.png), ``verify`` (the
     flown check as a ``RunResult``, with ``verify=True``) and ``save(dir)``."""
 
-    @property
-    def summary(self) -> dict:
-        return json.loads((self.path / "trim.json").read_text())
+    JSON, MD, PNG = "trim.json", "trim.md", "trim.png"
 
     @property
     def recommendation(self) -> dict:
         return self.summary["recommendation"]
-
-    @property
-    def markdown(self) -> str:
-        return (self.path / "trim.md").read_text()
 
     @property
     def verify(self) -> RunResult | None:
@@ -306,7 +305,3 @@ class TrimResult(_Directory):
         run = RunResult(d)
         run._parent = self
         return run
-
-    def figure(self):
-        """trim.png as a matplotlib Figure (an image of the saved file)."""
-        return _png_figure(self.path / "trim.png")

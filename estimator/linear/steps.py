@@ -65,6 +65,18 @@ def discretize_many(p: ModelParams, q: ProcessNoise, dt) -> Discretized:
     return Discretized(dt, Phi, Gam, Qd, unit)
 
 
+def set_distinct(table, dt) -> None:
+    """``table.dt`` (checked: 1-D, positive, finite) and its ``distinct`` intervals with
+    each step's ``index`` into them, set on a frozen dataclass ``table``."""
+    dt = np.asarray(dt, dtype=float)
+    if dt.ndim != 1 or not np.all(np.isfinite(dt) & (dt > 0)):
+        raise ValueError("step intervals must be a 1-D array, positive and finite")
+    distinct, index = np.unique(dt, return_inverse=True)
+    object.__setattr__(table, "dt", dt)
+    object.__setattr__(table, "distinct", distinct)
+    object.__setattr__(table, "index", index)
+
+
 @dataclass(frozen=True, eq=False)
 class StepTable:
     """The step intervals of a run (``dt``, one per sample) and the model they are
@@ -79,13 +91,7 @@ class StepTable:
     index: np.ndarray = field(init=False)
 
     def __post_init__(self):
-        dt = np.asarray(self.dt, dtype=float)
-        if dt.ndim != 1 or not np.all(np.isfinite(dt) & (dt > 0)):
-            raise ValueError("step intervals must be a 1-D array, positive and finite")
-        distinct, index = np.unique(dt, return_inverse=True)
-        object.__setattr__(self, "dt", dt)
-        object.__setattr__(self, "distinct", distinct)
-        object.__setattr__(self, "index", index)
+        set_distinct(self, self.dt)
 
     @classmethod
     def from_times(cls, params: ModelParams, noise: ProcessNoise, t_s) -> StepTable:

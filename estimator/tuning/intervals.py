@@ -25,7 +25,7 @@ import numpy as np
 
 from ..kalman.steps import N_UT, pack
 from ..linear.model import ModelParams, ProcessNoise
-from ..linear.steps import step_intervals
+from ..linear.steps import set_distinct, step_intervals
 from ..linear.transition import _noise_matrix, propagate_many
 
 RESOLUTION_S = 1e-9
@@ -55,15 +55,9 @@ class StepNoise:
     _cache: tuple | None = field(init=False)
 
     def __post_init__(self):
-        dt = np.asarray(self.dt, dtype=float)
-        if dt.ndim != 1 or not np.all(np.isfinite(dt) & (dt > 0)):
-            raise ValueError("step intervals must be a 1-D array, positive and finite")
-        distinct, index = np.unique(dt, return_inverse=True)
-        object.__setattr__(self, "dt", dt)
-        object.__setattr__(self, "distinct", distinct)
-        object.__setattr__(self, "index", index)
-        object.__setattr__(self, "_cache", self._evaluate(np.arange(len(distinct)))
-                           if len(distinct) <= MAX_CACHED else None)
+        set_distinct(self, self.dt)
+        object.__setattr__(self, "_cache", self._evaluate(np.arange(len(self.distinct)))
+                           if len(self.distinct) <= MAX_CACHED else None)
 
     def __len__(self) -> int:
         return len(self.dt)
