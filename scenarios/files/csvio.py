@@ -216,6 +216,41 @@ def read_csv(path: Path | str, text=TEXT_COLUMNS, only=None) -> dict[str, np.nda
         raise ValueError(f"{path}: {_first_bad_row(body, names, wanted, text)}") from None
 
 
+def _has_non_number_text(path: Path | str, block: int = 1 << 24) -> bool:
+    """Whether the rows after the header hold ``nan`` or ``inf`` in any case, read a
+    block at a time (a season's file is not held whole for this)."""
+    with open(path) as fh:
+        line = fh.readline()
+        while line.startswith("#"):
+            line = fh.readline()
+        tail = ""
+        while chunk := fh.read(block):
+            text = tail + chunk.lower()
+            if "nan" in text or "inf" in text:
+                return True
+            tail = text[-2:]
+    return False
+
+
+def non_number_cells(path: Path | str, numeric: list[str]) -> dict[str, np.ndarray]:
+    """Per column of ``numeric``, the cells written as a non-finite number (``nan``,
+    ``inf``): the fast reader takes them as it takes an empty cell, a dropout, so they
+    are found here from the text, and only when the text has any at all."""
+    if not _has_non_number_text(path):
+        return {}
+    import pandas as pd
+    frame = pd.read_csv(path, comment="#", usecols=lambda n: n in numeric, dtype=str,
+                        keep_default_na=False, na_filter=False)
+    marks = {}
+    for name in frame.columns:
+        cells = frame[name].str.strip()
+        value = pd.to_numeric(cells, errors="coerce").to_numpy(dtype=float)
+        bad = (cells != "").to_numpy() & ~np.isfinite(value)
+        if bad.any():
+            marks[name] = bad
+    return marks
+
+
 def comments(path: Path | str) -> dict[str, str]:
     """The ``# key: value`` lines a CSV begins with, by key (``# epoch_utc: ...``)."""
     found = {}

@@ -29,7 +29,7 @@ import numpy as np
 from ..config.suggestions import closest
 from ..units import RAD2DEG, RADPS2RPM
 from .columns import epoch_ns, utc_text
-from .csvio import comments, read_csv
+from .csvio import comments, non_number_cells, read_csv
 from .rundir import RunDirError
 
 # telemetry.columns key -> (canonical column, unit key in telemetry.units, required)
@@ -98,41 +98,6 @@ def read_table(path: Path, spec, n_wheels: int) -> Table:
     return Table(cols, header.strip().split(","), comments(path).get("epoch_utc"),
                  "its # epoch_utc line",
                  non_number_cells(path, [n for n, v in cols.items() if v.dtype.kind == "f"]))
-
-
-def _has_non_number_text(path: Path, block: int = 1 << 24) -> bool:
-    """Whether the rows after the header hold ``nan`` or ``inf`` in any case, read a
-    block at a time (a season's file is not held whole for this)."""
-    with open(path) as fh:
-        line = fh.readline()
-        while line.startswith("#"):
-            line = fh.readline()
-        tail = ""
-        while chunk := fh.read(block):
-            text = tail + chunk.lower()
-            if "nan" in text or "inf" in text:
-                return True
-            tail = text[-2:]
-    return False
-
-
-def non_number_cells(path: Path, numeric: list[str]) -> dict[str, np.ndarray]:
-    """Per column of ``numeric``, the cells written as a non-finite number (``nan``,
-    ``inf``): the fast reader takes them as it takes an empty cell, a dropout, so they
-    are found here from the text, and only when the text has any at all."""
-    if not _has_non_number_text(path):
-        return {}
-    import pandas as pd
-    frame = pd.read_csv(path, comment="#", usecols=lambda n: n in numeric, dtype=str,
-                        keep_default_na=False, na_filter=False)
-    marks = {}
-    for name in frame.columns:
-        cells = frame[name].str.strip()
-        value = pd.to_numeric(cells, errors="coerce").to_numpy(dtype=float)
-        bad = (cells != "").to_numpy() & ~np.isfinite(value)
-        if bad.any():
-            marks[name] = bad
-    return marks
 
 
 def read_input_csv(path: Path, kind: str, **how) -> dict[str, np.ndarray]:
