@@ -24,9 +24,8 @@ import pytest
 
 from scenarios.config.loader import load_scenario
 from scenarios.files import screen
-from scenarios.files.csvio import read_csv
+from scenarios.files.csvio import non_number_cells, read_csv
 from scenarios.files.telemetry_file import read_screened
-from scenarios.files.csvio import non_number_cells
 
 from .test_cli_run import run_cli
 
