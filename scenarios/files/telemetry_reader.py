@@ -156,8 +156,9 @@ def read_parquet(path: Path, wanted: set[str], time_col: str) -> Table:
                 or pa.types.is_boolean(col.type):
             values = col.cast(pa.float64()).to_numpy(zero_copy_only=False)
             columns[name] = np.where(nulls, np.nan, values)
-            # A null is a dropout; a NaN or infinity stored as a value is a bad value.
-            bad = ~nulls & ~np.isfinite(values)
+            # A null is a dropout, and so is a NaN: numpy-based writers store a missing
+            # float as NaN.  An infinity is a bad value (an overflow).
+            bad = np.isinf(values) & ~nulls
             if bad.any():
                 written[name] = bad
         else:

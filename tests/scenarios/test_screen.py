@@ -426,3 +426,31 @@ def test_non_number_cells_marks_nan_and_inf_text_but_not_an_empty_cell(tmp_path)
     clean = tmp_path / "clean.csv"
     clean.write_text("t_s,roll_deg\n0,\n1,0.5\n")
     assert non_number_cells(clean, ["t_s", "roll_deg"]) == {}
+
+
+def test_parquet_infinity_is_screened_and_a_null_or_nan_is_a_dropout(run6, tmp_path):
+    """In Parquet a missing reading is a null, or a NaN (numpy-based writers store a
+    missing float so, as dynprop's telemetry holds its yaw dropouts): both dropouts,
+    not counted.  An infinity stored as a value is an overflow, screened.  run6's file
+    with a null roll in row 10, a NaN roll in row 20 and an infinite wheel in row 30
+    screens exactly the wheel."""
+    pa = pytest.importorskip("pyarrow")
+    import pyarrow.parquet as pq
+    from scenarios.files.csvio import comments, read_csv
+    s = load_scenario(run6 / "scenario.yaml")
+    cols = read_csv(run6 / "telemetry.csv")
+    n = len(cols["t_s"])
+    roll = pa.array(np.where(np.arange(n) == 20, np.nan, cols["roll_deg"]),
+                    mask=np.arange(n) == 10)
+    wheel = cols["wheel1_rpm"].copy()
+    wheel[30] = np.inf
+    table = pa.table({**{k: v for k, v in cols.items() if k not in ("roll_deg", "wheel1_rpm")},
+                      "roll_deg": roll, "wheel1_rpm": wheel})
+    path = tmp_path / "tel.parquet"
+    epoch = comments(run6 / "telemetry.csv")["epoch_utc"]
+    pq.write_table(table.replace_schema_metadata({"epoch_utc": epoch}), path)
+    got, report = read_screened(path, s)
+    summary = report.summary()
+    assert summary["values"] == 1, summary["columns"]
+    assert summary["columns"]["wheel1_rpm"]["reasons"]["non-finite"]["first_rows"] == [32]
+    assert np.isnan(got["roll_deg"][[10, 20]]).all() and np.isnan(got["wheel1_rpm"][30])
