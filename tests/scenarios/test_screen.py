@@ -436,6 +436,7 @@ def test_parquet_infinity_is_screened_and_a_null_or_nan_is_a_dropout(run6, tmp_p
     screens exactly the wheel."""
     pa = pytest.importorskip("pyarrow")
     import pyarrow.parquet as pq
+
     from scenarios.files.csvio import comments, read_csv
     s = load_scenario(run6 / "scenario.yaml")
     cols = read_csv(run6 / "telemetry.csv")
