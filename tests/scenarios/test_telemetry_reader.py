@@ -287,8 +287,11 @@ def test_an_unknown_unit_is_one_line_naming_the_key(tmp_path, own, canonical, ca
 
 def test_a_mapped_column_the_file_lacks_is_one_line_with_the_likely_one(tmp_path, own,
                                                                          canonical):
+    # Every other column and unit as the file has them (a yaw in µrad read as degrees
+    # would be refused too, for its unit: test_screen.py).
     s = _with(own, *[f'telemetry.columns.{k}="{v}"' for k, v in GROUND.items()],
-              'telemetry.columns.roll="ES_ROL"', "telemetry.units.wheels=rad/s")
+              'telemetry.columns.roll="ES_ROL"', "telemetry.units.wheels=rad/s",
+              "telemetry.units.yaw=urad", "telemetry.units.yaw_sigma=urad")
     path = _ground_file(tmp_path, canonical)
     assert _refused(s, path) == [f"{path}: no column ES_ROL (telemetry.columns.roll); did you "
                                  "mean 'ES_ROLL'?"]
