@@ -64,11 +64,16 @@ def autocorrelation(e: np.ndarray, max_lag: int) -> tuple[np.ndarray, np.ndarray
 def whiteness(e: np.ndarray, max_lag: int) -> dict:
     """How white a standardised innovation series is: ρ(k) for k = 1 … max_lag against
     ±1.96/√pairs; the share of lags outside (about 5% for a white series), the largest
-    |ρ| and ρ(1).  None where there are too few samples to judge."""
+    |ρ|, and ρ at the first lag with 30 pairs (``rho_1``, at lag ``first_lag``: 1 for
+    an update every sample; 2 for telemetry at every other sample, whose lag 1 has no
+    pair at all).  None where there are too few samples to judge."""
     rho, pairs = autocorrelation(e, max_lag)
     ok = pairs[1:] >= 30
     if not ok.any():
-        return {"lags": 0, "fraction_outside": None, "max_abs_rho": None, "rho_1": None}
+        return {"lags": 0, "fraction_outside": None, "max_abs_rho": None, "rho_1": None,
+                "first_lag": None}
     r, bound = rho[1:][ok], 1.96 / np.sqrt(pairs[1:][ok])
+    first = int(np.argmax(ok)) + 1
     return {"lags": int(ok.sum()), "fraction_outside": float(np.mean(np.abs(r) > bound)),
-            "max_abs_rho": float(np.abs(r).max()), "rho_1": float(rho[1])}
+            "max_abs_rho": float(np.abs(r).max()), "rho_1": float(rho[first]),
+            "first_lag": first}

@@ -480,6 +480,27 @@ def test_run_tuned_from_carries_the_tuned_noise_and_says_so(tuned, run, tmp_path
     assert not (tmp_path / "x").exists()
 
 
+def test_tune_takes_telemetry_at_every_other_grid_step(run, tmp_path):
+    """A 1.024 s file on the 0.512 s grid, which `estimate` takes (every other step
+    without a row), once crashed `tune` writing tune.json ("Out of range float values
+    are not JSON compliant: nan"): ρ(1) of innovations at every other step has no pair.
+    Now the whiteness is read at the first lag with pairs, the file's own step (lag 2):
+    a finite correlation, |ρ| < 1, for every kind, before and after."""
+    header, rows = telemetry_text(run)
+    path = write_telemetry(tmp_path / "every_other.csv", header, rows[::2])
+    out = tmp_path / "tune"
+    rc, _, err = run_cli("tune", str(path), "--scenario", str(run / "scenario.yaml"),
+                         "--params", ",".join(TUNED), "--out", str(out))
+    assert rc == 0, err
+    d = json.loads((out / "tune.json").read_text())
+    assert d["telemetry"]["cadence_s"] == pytest.approx(1.024)
+    for side in ("before", "after"):
+        for kind in ("roll", "yaw", "h"):
+            w = d[side]["whiteness"][kind]
+            assert w["first_lag"] == 2 and math.isfinite(w["rho_1"]), (side, kind, w)
+            assert abs(w["rho_1"]) < 1
+
+
 def test_run_tuned_from_keeps_the_pitch_filter_consistent(tuned, run, tmp_path):
     """Tuning roll/yaw's q_x must not reach the pitch filter, which once borrowed q_x:
     a q_x cut by the tune made `run --tuned-from`'s pitch NEES 2644 against χ²(3)'s
