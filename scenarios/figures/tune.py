@@ -27,7 +27,9 @@ def tune_figure(path: Path, r) -> Path:
               for kind in r.after.nis}
     gain = r.after.loglik - r.before.loglik
     title = (f"{r.source.scenario.name}: noise by maximum likelihood on "
-             f"{r.source.span_s / 3600:.1f} h of telemetry; ln L +{gain:.1f}; gap-end σ_yaw "
+             f"{r.source.span_s / 3600:.1f} h of telemetry; ln L +{gain:.1f}; steady-state gap-end σ_yaw "
              f"{r.before.sigma_yaw_deg['gap_end']:.4f}° → {r.after.sigma_yaw_deg['gap_end']:.4f}°")
-    return save_figure(plot_tune(profiles, nis, bounds, rho, r.source.scenario.sample_interval_s,
-                                 pairs, title), path)
+    # The lags are in samples of the innovation series: the grid's step on it, the
+    # median cadence off it.
+    return save_figure(plot_tune(profiles, nis, bounds, rho, r.source.cadence_s, pairs, title),
+                       path)
