@@ -27,7 +27,8 @@ def tune_figure(path: Path, r) -> Path:
               for kind in r.after.nis}
     gain = r.after.loglik - r.before.loglik
     title = (f"{r.source.scenario.name}: noise by maximum likelihood on "
-             f"{r.source.span_s / 3600:.1f} h of telemetry; ln L +{gain:.1f}; steady-state gap-end σ_yaw "
+             f"{r.source.span_s / 3600:.1f} h of telemetry; ln L +{gain:.1f}; "
+             "steady-state gap-end σ_yaw "
              f"{r.before.sigma_yaw_deg['gap_end']:.4f}° → {r.after.sigma_yaw_deg['gap_end']:.4f}°")
     # The lags are in samples of the innovation series: the grid's step on it, the
     # median cadence off it.
