@@ -102,7 +102,9 @@ def read_raw(source: str | Path) -> tuple[dict, str]:
 def _read_source(source: str | Path) -> tuple[dict, str, str]:
     """``read_raw``, and the file's text (for the line of each key in messages)."""
     path = Path(source)
-    if not path.exists() and str(source) in bundled_names():
+    # A bundled name is the bundled file unless a file of that name is here (a folder
+    # named like it, a run's --out, does not shadow it).
+    if not path.is_file() and str(source) in bundled_names():
         path = bundled_dir() / f"{source}.yaml"
     if not path.is_file():
         names = bundled_names()

@@ -68,14 +68,15 @@ def gap_end_check(errors, sigmas) -> dict:
 
 
 def nees_check(mean, bounds, per_state: dict | None, who: str = "the filter",
-               why_not: str = "no truth to compare with", after: str = "") -> dict:
+               why_not: str = "no truth to compare with", after: str = "",
+               states: int = 9) -> dict:
     """Mean NEES against the one-sample 95% bounds (module doc).  Outside them the
     filter is conservative or overconfident; inside, the test does not reject it,
     which is no proof of consistency: ``passed`` true, verdict "not rejected"."""
     if mean is None:
         return _not_tested(why_not, verdict="not tested")
     lo, hi = bounds
-    head = f"mean NEES{after} {mean:.2f} (expected 9; 95% bounds {lo:.2f}–{hi:.2f})"
+    head = f"mean NEES{after} {mean:.2f} (expected {states}; 95% bounds {lo:.2f}–{hi:.2f})"
     states = per_state or {}
     if mean > hi:
         loud = ", ".join(f"{k} {v:.2g}" for k, v in states.items() if v > 1)
@@ -196,7 +197,7 @@ def pitch_nees_check(pitch: dict | None) -> dict:
                            "check leaves out", verdict="not tested")
     mean = pitch.get("nees_mean_after_1h")
     return nees_check(mean, pitch["nees_bounds_95"], None, who="the pitch filter",
-                      after=" after the first hour") | {
+                      after=" after the first hour", states=3) | {
         "nees_mean_after_1h": mean, "bounds": list(pitch["nees_bounds_95"])}
 
 

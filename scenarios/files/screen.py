@@ -87,6 +87,7 @@ class ScreenReport:
     screened: tuple[Screened, ...]
     t_s: np.ndarray           # every file row's time, for the report
     names: dict[str, str]     # canonical column -> the file's name
+    held: tuple = ()          # (column, row, row held from): a wheel's screened end
 
     @property
     def count(self) -> int:
@@ -113,6 +114,8 @@ class ScreenReport:
                 "first_t_s": [float(self.t_s[r]) for r in s.rows[:FIRST]],
                 "first_values": [_json_number(v) for v in s.values[:FIRST]]}
         return {"enabled": self.enabled, "values": self.count, "columns": columns,
+                "held_at_ends": [{"column": self.names.get(c, c), "row": r + 2,
+                                  "held_from_row": f + 2} for c, r, f in self.held],
                 "limits": None if self.limits is None else self.limits.as_dict()}
 
 
@@ -135,6 +138,12 @@ def screen_warnings(screened: dict | None) -> list[dict]:
         out.append({"check": "telemetry_screen",
                     "message": f"screened {n} value{'s' * (n > 1)} {text}: {where}; each is "
                     "a dropout of its sensor (telemetry.screen)"})
+    for h in screened.get("held_at_ends") or ():
+        out.append({"check": "telemetry_screen",
+                    "message": f"{h['column']}'s reading in row {h['row']}, the file's "
+                    f"{'first' if h['row'] < h['held_from_row'] else 'last'}, was screened: "
+                    f"row {h['held_from_row']}'s is held there, since the wheel-torque "
+                    "bridge needs a reading at both ends"})
     return out
 
 
@@ -229,10 +238,18 @@ def screen(cols: dict[str, np.ndarray], written: dict[str, np.ndarray], s,
             drop(name, np.abs(out[name]) > lim.earth_range_deg, "range")
     if "yaw_deg" in out:
         drop("yaw_deg", np.abs(out["yaw_deg"]) > 180.0, "range")
+    if "yaw_sigma_deg" in out:
+        drop("yaw_sigma_deg", out["yaw_sigma_deg"] <= 0, "range")
     wheels = [c for c in out if c.startswith("wheel") and c.endswith("_rpm")]
     for name in wheels:
         drop(name, np.abs(out[name]) > lim.wheel_speed_max_rpm, "range")
     _screen_heads(out, lim, drop)
+    # A yaw without its σ cannot be weighed: it goes with its σ, for the σ's reason.
+    for bad in [x for x in found if x.column == "yaw_sigma_deg"]:
+        if "yaw_deg" in out:
+            mask = np.zeros(len(t), dtype=bool)
+            mask[bad.rows] = True
+            drop("yaw_deg", mask & np.isfinite(out["yaw_deg"]), bad.reason)
     for name in ("roll_deg", "pitch_deg"):
         if name in out:
             drop(name, jumps(t, out[name], lim.attitude_rate_degps, lim.earth_allowance_deg),
@@ -242,7 +259,26 @@ def screen(cols: dict[str, np.ndarray], written: dict[str, np.ndarray], s,
         drop(name, jumps(t, out[name], rate, lim.wheel_allowance_rpm), "jump")
     if not found:
         return cols, ScreenReport(True, lim, (), t, names)
-    return out, ScreenReport(True, lim, tuple(found), t, names)
+    held = _hold_wheel_ends(out, wheels, found)
+    return out, ScreenReport(True, lim, tuple(found), t, names, held)
+
+
+def _hold_wheel_ends(out: dict, wheels: list[str], found: list[Screened]) -> tuple:
+    """A wheel's first or last reading screened: the nearest good reading held there,
+    since the wheel-torque bridge interpolates between readings and needs both ends
+    (``estimator.kalman.preprocess``).  (column, row, row held from) for each."""
+    held = []
+    for name in wheels:
+        rows = np.concatenate([x.rows for x in found if x.column == name] or [[]])
+        v = out[name]
+        ok = np.flatnonzero(np.isfinite(v))
+        if not rows.size or not ok.size:
+            continue
+        for end, near in ((0, ok[0]), (len(v) - 1, ok[-1])):
+            if end in rows:
+                v[end] = v[near]
+                held.append((name, int(end), int(near)))
+    return tuple(held)
 
 
 def _screen_heads(out: dict, lim: Limits, drop) -> None:
@@ -289,11 +325,12 @@ def unit_problems(path, cols: dict[str, np.ndarray], s, names: dict[str, str]) -
         if not v.size:
             continue
         ratio = float(np.median(v)) / nominal
+        given = s.telemetry.units.wheels
+        as_written = float(np.median(v)) / (RADPS2RPM if given == "rad/s" else 1.0)
         for unit, factor in (("rad/s", 1 / RADPS2RPM), ("rpm", RADPS2RPM)):
-            if abs(np.log(ratio / factor)) < np.log(2):
-                given = "rpm" if unit == "rad/s" else "rad/s"
+            if unit != given and abs(np.log(ratio / factor)) < np.log(2):
                 problems.append(
-                    f"{path}: {names.get(name, name)} reads a median {np.median(v):.4g} "
+                    f"{path}: {names.get(name, name)} reads a median {as_written:.4g} "
                     f"{given}, {ratio:.4f} × the wheel's nominal {nominal:.5g} rpm: the "
                     f"file's wheel speeds look like {unit}, not {given} (--unit "
                     f"wheels={unit})")
@@ -307,12 +344,14 @@ def unit_problems(path, cols: dict[str, np.ndarray], s, names: dict[str, str]) -
         d = np.diff(v)
         expected, whose = earth
         if key == "yaw":
-            # The coarse heads' yaw is white at about their 1° (the digital head's is
+            # The coarse heads' yaw is white at about their 1°; the digital head's is
             # quantised and slowly varying, its sample-to-sample scatter far below its
-            # σ): judge the yaw on consecutive CASS readings when the file says which.
+            # σ (0.006° against 0.036°), and would read as rad.  So the yaw is judged
+            # on consecutive CASS readings, and not at all in a file without sun_head.
+            if head is None:
+                continue
             expected, whose = cass.noise_deg, "the coarse Sun sensors'"
-            if head is not None:
-                d = d[(head[:-1] >= 1) & (head[1:] == head[:-1])]
+            d = d[(head[:-1] >= 1) & (head[1:] == head[:-1])]
         d = d[np.isfinite(d)]
         if d.size < 10 or expected == 0:
             continue

@@ -180,7 +180,8 @@ def read_screened(path: Path, s: Scenario) -> tuple[dict[str, np.ndarray], Scree
     if t is not None and len(t) < 2:
         problems.append(f"{path}: needs at least two samples")
     names = file_names(s.telemetry, n_wheels)
-    problems += unit_problems(path, cols, s, names)
+    if s.telemetry.screen.enabled:
+        problems += unit_problems(path, cols, s, names)
     report = None
     if t is not None and not problems:
         cols, report = screen(cols, written_marks(table, s.telemetry, n_wheels), s, names)

@@ -244,3 +244,19 @@ def test_estimate_trim_and_tune_of_six_hours(six_hours, tmp_path):
     rc, _, stderr = run_cli("tune", str(run), "--params", "q_x,q_z,q_w")
     assert rc == 0, stderr
     assert vacuous(json.loads((run / "tune" / "tune.json").read_text())) == []
+
+
+def test_pitch_nees_check_says_its_own_expectation_and_bounds():
+    """The pitch filter has 3 states: its NEES check expects 3 and judges against
+    χ²(3)'s one-sample 95% points (scipy), overconfident above them."""
+    from scipy.stats import chi2
+
+    from scenarios.files.checks import pitch_nees_check
+    lo, hi = chi2.ppf([0.025, 0.975], 3)
+    c = pitch_nees_check({"nees_mean": 2644.0, "nees_mean_after_1h": 2644.0,
+                          "nees_bounds_95": [lo, hi]})
+    assert c["passed"] is False and c["verdict"] == "overconfident"
+    assert "(expected 3; 95% bounds 0.22–9.35)" in c["detail"]
+    assert pitch_nees_check({"nees_mean": 1.0, "nees_mean_after_1h": 1.0,
+                             "nees_bounds_95": [lo, hi]})["passed"] is True
+    assert pitch_nees_check(None)["passed"] is None
