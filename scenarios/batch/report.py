@@ -20,6 +20,7 @@ from ..config import build
 from ..config.schema import output_stride
 from ..files.columns import STATE_COLUMNS, display_factors, estimate_columns
 from ..files.csvio import write_csv
+from ..files.screen import screen_messages
 from ..run.estimate_truth import gap_end_rows
 from ..run.filtering import design_of, paper_smoother
 from ..run.whole import filter_telemetry
@@ -142,7 +143,8 @@ def run_batch(source: Path, scenario=None, overrides=(), truth: Path | None = No
          "converged": all(sol.converged for sol in run.solutions),
          "not_converged": [sp.index for sp, sol in zip(run.spans, run.solutions, strict=True)
                            if not sol.converged],
-         "warnings": _screen_lines(grid) + _warnings(run, span_h),
+         "warnings": screen_messages(None if grid.screen is None else grid.screen.summary())
+         + _warnings(run, span_h),
          "batches": _batch_entries(run, t, wn),
          "gap_ends": _gap_ends(t, gaps, rows, run.x, sig_b, real),
          "truth": None}
@@ -205,13 +207,6 @@ def _gap_ends(t, gaps, rows, x_batch, sig_batch, real) -> list[dict]:
 
 def _finite(v) -> float | None:
     return float(v) if np.isfinite(v) else None
-
-
-def _screen_lines(grid) -> list[str]:
-    """The screen's warnings (``files.screen``), one per reason."""
-    from ..files.screen import screen_warnings
-    return [w["message"] for w in
-            screen_warnings(None if grid.screen is None else grid.screen.summary())]
 
 
 def _warnings(run: BatchRun, span_h: float) -> list[str]:

@@ -30,6 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import median_abs_deviation
 
 from ..config import build
 from ..config.screen import HALF_WINDOW, JUMP_NOISE_SIGMAS, JUMP_QUANTA, WHEEL_SPEED_FACTOR
@@ -147,6 +148,12 @@ def screen_warnings(screened: dict | None) -> list[dict]:
     return out
 
 
+def screen_messages(screened: dict | None) -> list[str]:
+    """``screen_warnings``' sentences alone, as tune.json, trim.json and batch.json
+    list their warnings."""
+    return [w["message"] for w in screen_warnings(screened)]
+
+
 def _json_number(v: float):
     return float(v) if np.isfinite(v) else str(v)
 
@@ -229,7 +236,7 @@ def screen(cols: dict[str, np.ndarray], written: dict[str, np.ndarray], s,
 
     measured = [c for c in out if c not in ("t_s", "sun_head")]
     for name in measured:
-        bad = ~np.isfinite(out[name]) & ~np.isnan(out[name])      # ±inf
+        bad = np.isinf(out[name])
         if name in written:
             bad |= written[name]
         drop(name, bad, "non-finite")
@@ -355,7 +362,7 @@ def unit_problems(path, cols: dict[str, np.ndarray], s, names: dict[str, str]) -
         d = d[np.isfinite(d)]
         if d.size < 10 or expected == 0:
             continue
-        scatter = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2)
+        scatter = float(median_abs_deviation(d, scale="normal")) / np.sqrt(2)
         if scatter == 0:
             continue
         ratio = scatter / expected
@@ -372,4 +379,4 @@ def unit_problems(path, cols: dict[str, np.ndarray], s, names: dict[str, str]) -
 
 
 __all__ = ["Limits", "ScreenReport", "Screened", "jumps", "limits", "screen",
-           "screen_warnings", "unit_problems"]
+           "screen_messages", "screen_warnings", "unit_problems"]

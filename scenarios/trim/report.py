@@ -13,6 +13,7 @@ import numpy as np
 from ..config.loader import load_scenario
 from ..config.schema import Scenario
 from ..files.csvio import read_csv
+from ..files.screen import screen_messages
 from .batch import (
     ASSUMED_KNOWN,
     ESTIMATED,
@@ -216,11 +217,6 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
     return result
 
 
-def screen_warnings(screened):
-    from ..files.screen import screen_warnings as lines
-    return lines(screened)
-
-
 def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = None,
              telemetry: Path | None = None, do_verify: bool = False,
              overrides=()) -> dict:
@@ -237,7 +233,7 @@ def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = No
                                              regular), regular=regular)
     d = report_dict(s, r, truth)
     d["screened"] = None if screened is None else screened.summary()
-    d["warnings"] = [w["message"] for w in screen_warnings(d["screened"])]
+    d["warnings"] = screen_messages(d["screened"])
     # RUN_DIR/trim is trim's own, replaced each time (there is no --out to name).
     with staged_run_dir(run_dir / "trim", force=True, label="") as stage:
         if do_verify:

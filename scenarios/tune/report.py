@@ -11,6 +11,7 @@ import yaml
 from dynprop.estimator.analysis.covariance import PAPER_SIGMA_YAW_DEG
 from dynprop.estimator.tuning.likelihood import NOISE_KEYS
 
+from ..files.screen import screen_messages
 from .fit import ROLL, Diagnostics, TuneOptions, TuneResult, tune
 from .source import read_source
 
@@ -40,11 +41,6 @@ def estimated(r: TuneResult) -> dict:
     return out
 
 
-def _screen_warnings(screened):
-    from ..files.screen import screen_warnings
-    return screen_warnings(screened)
-
-
 def report_dict(r: TuneResult, command: str | None = None) -> dict:
     src, fit = r.source, r.fit
     roll = None
@@ -57,7 +53,7 @@ def report_dict(r: TuneResult, command: str | None = None) -> dict:
                         "simulated Earth sensor and the filter's roll variance"}
     return {
         "scenario": src.scenario.name,
-        "warnings": [w["message"] for w in _screen_warnings(src.stats.get("screened"))],
+        "warnings": screen_messages(src.stats.get("screened")),
         "telemetry": {"file": str(src.telemetry),
                       "run_dir": None if src.run_dir is None else str(src.run_dir),
                       "span_h": src.span_s / 3600, **src.stats,
