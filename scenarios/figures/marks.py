@@ -65,6 +65,7 @@ class Cut(Mapping):
     source: Mapping
     take: np.ndarray                    # source row of each drawn row; -1 at a break
     gaps_s: tuple[tuple[float, float], ...]   # each gap's (last row before, first after), s
+    n: int                              # the source's rows (its t_s read once, not per key)
 
     def rows(self, a) -> np.ndarray:
         """A per-row array cut: NaN at the breaks, and a boolean True at a break only
@@ -84,7 +85,7 @@ class Cut(Mapping):
     def __getitem__(self, key):
         a = self.source[key]
         if (not self.gaps_s or key in NOT_ROWS or np.ndim(a) == 0
-                or len(a) != len(self.source["t_s"])):
+                or len(a) != self.n):
             return a
         return self.rows(a)
 
@@ -107,4 +108,4 @@ def cut_at_gaps(c: Mapping) -> Cut:
         keep[i + 1:j] = False
     idx = np.flatnonzero(keep)
     take = np.insert(idx, np.searchsorted(idx, [i for i, _ in gaps], side="right"), -1)
-    return Cut(c, take, tuple((float(t[i]), float(t[j])) for i, j in gaps))
+    return Cut(c, take, tuple((float(t[i]), float(t[j])) for i, j in gaps), t.size)
