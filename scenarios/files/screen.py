@@ -30,7 +30,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import median_abs_deviation
 
 from ..config import build
 from ..config.screen import HALF_WINDOW, JUMP_NOISE_SIGMAS, JUMP_QUANTA, WHEEL_SPEED_FACTOR
@@ -362,7 +361,10 @@ def unit_problems(path, cols: dict[str, np.ndarray], s, names: dict[str, str]) -
         d = d[np.isfinite(d)]
         if d.size < 10 or expected == 0:
             continue
-        scatter = float(median_abs_deviation(d, scale="normal")) / np.sqrt(2)
+        # The normal-scaled median absolute deviation (scipy.stats.median_abs_deviation
+        # with scale="normal"; written out, since importing scipy.stats costs every
+        # command that reads telemetry, `export` among them, 0.45 s of start-up).
+        scatter = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2)
         if scatter == 0:
             continue
         ratio = scatter / expected
