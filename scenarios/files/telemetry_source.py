@@ -85,3 +85,13 @@ class WholeSource:
 
     def close(self) -> None:
         pass
+
+
+def open_source(path, s, folder, block_rows: int | None = None) -> TelemetrySource:
+    """The telemetry file ``path`` as the scenario ``s`` reads it, every problem
+    reported (``RunDirError``, one line each) before this returns, so before a caller
+    writes anything.  ``folder``: where a streamed reader keeps its scratch files (the
+    caller's stage); ``block_rows``: its block size (a test hook)."""
+    from .telemetry_file import on_grid, read_screened
+    cols, report = read_screened(path, s)
+    return WholeSource(on_grid(cols, s.sample_interval_s, s.estimator.max_gap_s, path, report))
