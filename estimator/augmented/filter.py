@@ -259,16 +259,17 @@ def augmented_filter(meas: Measurements, disc, x0, P0, u=None, *, bias: BiasMode
 def augmented_smoother(result: AugmentedResult, disc, u=None, *, bias: BiasModel | None,
                        extra: ExtraNoise | None = None, covariance: bool = True,
                        x_after: np.ndarray | None = None, backend: str | None = None,
-                       chunk: int = 4096) -> AugmentedSmootherResult:
+                       chunk: int = 4096, P_after: np.ndarray | None = None
+                       ) -> AugmentedSmootherResult:
     """``kalman.rts_smoother`` on the augmented state, over the filter's stored
     posteriors (which already hold the gate's decisions, so it has no gate of its
-    own); ``covariance`` and ``x_after`` as there."""
+    own); ``covariance``, ``x_after`` and ``P_after`` as there."""
     names = _names(bias)
     if tuple(result.names) != names:
         raise ValueError(f"the filter ran with biases {result.names}, not {names}")
     n = len(result.x)
-    if x_after is not None and covariance:
-        raise ValueError("x_after needs covariance=False")
+    if x_after is not None and covariance and P_after is None:
+        raise ValueError("x_after with covariance needs P_after")
     if n < 2 and x_after is None:
         return AugmentedSmootherResult(result.x.copy(),
                                        result.P_packed.copy() if covariance else None, names)
@@ -278,15 +279,18 @@ def augmented_smoother(result: AugmentedResult, disc, u=None, *, bias: BiasModel
     # Backwards: step k uses the filter's k-th posterior and input, k = n−2 … 0 (from
     # n−1 when the smoothed state after the history is given).
     rev = slice(n - 2 if x_after is None else n - 1, None, -1)
-    if covariance:
-        s0 = np.concatenate([result.x[-1], result.P_packed[-1]])
+    if x_after is None:
+        last = [result.x[-1], result.P_packed[-1]] if covariance else [result.x[-1]]
     else:
-        s0 = result.x[-1] if x_after is None else np.asarray(x_after, dtype=float)
+        last = [x_after, P_after] if covariance else [x_after]
+    s0 = np.concatenate([np.asarray(v, dtype=float) for v in last])
     _, aux = eng.run_final(s0, [result.x[rev], result.P_packed[rev], u[rev], scale[rev]],
                            augmented_params(disc, bias, Qd_unit))
-    if x_after is not None:
-        return AugmentedSmootherResult(aux[::-1].copy(), None, names)
     k = result.x.shape[1]
+    if x_after is not None:
+        if covariance:
+            return AugmentedSmootherResult(aux[::-1, :k].copy(), aux[::-1, k:].copy(), names)
+        return AugmentedSmootherResult(aux[::-1].copy(), None, names)
     xs = np.vstack([aux[::-1, :k], result.x[-1:]])
     if not covariance:
         return AugmentedSmootherResult(xs, None, names)

@@ -172,18 +172,19 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
 
 def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
                  chunk: int = 4096, extra: ExtraNoise | None = None,
-                 covariance: bool = True, x_after: np.ndarray | None = None
-                 ) -> SmootherResult:
+                 covariance: bool = True, x_after: np.ndarray | None = None,
+                 P_after: np.ndarray | None = None) -> SmootherResult:
     """Rauch–Tung–Striebel smoother over a stored filter history (with the
     filter's own ``u`` and ``extra``).  ``covariance=False`` smooths the state alone
     (``smoother_x_step``; ``P_packed`` is None), about four times faster; with it,
     ``x_after`` is the smoothed state one step after the history (where a following
     stretch, smoothed first, begins), from which the recursion goes back over every
     sample: the smoother of the joined history, without joining it.  Without it the
-    last filtered state is its own smoothed value."""
+    last filtered state is its own smoothed value.  With ``covariance``, ``x_after``
+    comes with ``P_after`` (packed), the smoothed covariance there."""
     n = len(result.x)
-    if x_after is not None and covariance:
-        raise ValueError("x_after needs covariance=False")
+    if x_after is not None and covariance and P_after is None:
+        raise ValueError("x_after with covariance needs P_after")
     if n < 2 and x_after is None:  # nothing to smooth: the last estimate is the smoothed one
         return SmootherResult(result.x.copy(),
                               result.P_packed.copy() if covariance else None)
@@ -194,10 +195,7 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
     # Backwards: step k uses the filter's k-th posterior and input, for k = n−2 … 0
     # (from n−1 when the smoothed state after the history is given).
     rev = slice(n - 2 if x_after is None else n - 1, None, -1)
-    if covariance:
-        s0 = np.concatenate([result.x[-1], result.P_packed[-1]])
-    else:
-        s0 = result.x[-1] if x_after is None else np.asarray(x_after, dtype=float)
+    s0 = _smoother_start(result, covariance, x_after, P_after)
     backwards = [result.x[rev], result.P_packed[rev], u[rev], scale[rev]]
     if isinstance(disc, StepTable):
         if len(disc) != n:
@@ -211,12 +209,24 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
     else:
         _, aux = engine.run_final(s0, backwards, pack_params(disc, Qd_unit))
     if x_after is not None:
+        if covariance:
+            return SmootherResult(aux[::-1, :N_STATES].copy(), aux[::-1, N_STATES:].copy())
         return SmootherResult(aux[::-1].copy(), None)
     xs = np.vstack([aux[::-1, :N_STATES], result.x[-1:]])
     if not covariance:
         return SmootherResult(xs, None)
     Ps = np.vstack([aux[::-1, N_STATES:], result.P_packed[-1:]])
     return SmootherResult(xs, Ps)
+
+
+def _smoother_start(result, covariance: bool, x_after, P_after) -> np.ndarray:
+    """Where the backward recursion starts: the last filtered state (and covariance),
+    or the smoothed ones one step after the history."""
+    if x_after is None:
+        last = [result.x[-1], result.P_packed[-1]] if covariance else [result.x[-1]]
+    else:
+        last = [x_after, P_after] if covariance else [x_after]
+    return np.concatenate([np.asarray(v, dtype=float) for v in last])
 
 
 def _param_rows(table: StepTable, steps: np.ndarray) -> np.ndarray:

@@ -113,17 +113,18 @@ def paper_filter(design: FilterDesign, meas, disc, x0, P0, u=None, extra=None, s
 
 
 def paper_smoother(design: FilterDesign, result: FilterResult, disc, u=None, extra=None,
-                   covariance: bool = True, x_after=None) -> SmootherResult:
+                   covariance: bool = True, x_after=None, P_after=None) -> SmootherResult:
     """The RTS smoother of ``paper_filter``'s result; its x is the paper's nine states
-    (``x_after`` and ``full_x`` the augmented ones, for a window's smoothing)."""
+    (``x_after``, ``P_after``, ``full_x`` and ``full_P`` the augmented ones, for a
+    window's smoothing)."""
     if design.paper or not isinstance(result, BiasedResult):
         return rts_smoother(result, disc, u=u, extra=extra, covariance=covariance,
-                            x_after=x_after)
+                            x_after=x_after, P_after=P_after)
     s = augmented_smoother(result.augmented, disc, u, bias=design.bias, extra=extra,
-                           covariance=covariance, x_after=x_after)
+                           covariance=covariance, x_after=x_after, P_after=P_after)
     n = s.x.shape[1]
     P = None if s.P_packed is None else _block9(s.P_packed, n)
-    return SmoothedView(s.x[:, :N_STATES], P, s.x)
+    return SmoothedView(s.x[:, :N_STATES], P, s.x, s.P_packed)
 
 
 @dataclass(frozen=True)
@@ -131,6 +132,7 @@ class SmoothedView(SmootherResult):
     """``SmootherResult`` of the paper's nine states, ``full_x`` the augmented state."""
 
     full_x: np.ndarray | None = None
+    full_P: np.ndarray | None = None
 
 
 def head(result: FilterResult, n: int) -> FilterResult:
@@ -150,6 +152,12 @@ def smoothed_full_x(smoothed) -> np.ndarray:
     """The smoothed state a window's smoothing continues from (augmented if it is)."""
     full = getattr(smoothed, "full_x", None)
     return smoothed.x if full is None else full
+
+
+def smoothed_full_P(smoothed) -> np.ndarray | None:
+    """The smoothed covariance (packed) a window's smoothing continues from."""
+    full = getattr(smoothed, "full_P", None)
+    return smoothed.P_packed if full is None else full
 
 
 def bias_columns(result: FilterResult, k) -> dict[str, np.ndarray]:

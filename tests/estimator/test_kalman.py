@@ -362,6 +362,12 @@ def test_smoother_matches_a_dense_rts_reference(rng):
     later = rts_smoother(tail, DISC, covariance=False)
     earlier = rts_smoother(head, DISC, covariance=False, x_after=later.x[0])
     assert np.array_equal(np.vstack([earlier.x, later.x]), sx.x)
+    # With the covariance (a streamed estimate's smoothed.csv): from the later
+    # stretch's smoothed x and P at its first sample, again the same steps and bits.
+    later = rts_smoother(tail, DISC)
+    earlier = rts_smoother(head, DISC, x_after=later.x[0], P_after=later.P_packed[0])
+    assert np.array_equal(np.vstack([earlier.x, later.x]), sm.x)
+    assert np.array_equal(np.vstack([earlier.P_packed, later.P_packed]), sm.P_packed)
 
 
 def test_extra_noise_on_chosen_steps_matches_the_dense_references(rng):
