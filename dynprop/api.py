@@ -120,9 +120,8 @@ def estimate(telemetry, scenario: Scenario | str | Path, truth=None, *,
     ``--column``, ``--unit``, ``--epoch-utc`` and ``--tuned-from``; ``set`` and the
     keywords override scenario keys as in ``load_scenario`` (after them, as ``--set``).
     ``save(DIR)`` writes byte for byte what `dynprop estimate ... --out DIR` writes."""
-    from dynprop.scenarios.commands import estimate_inputs_of
+    from dynprop.scenarios.commands import estimate_into
     from dynprop.scenarios.files.rundir import staged_run_dir
-    from dynprop.scenarios.run.estimate import estimate_to_directory
     items, note = [], None
     if tuned_from is not None:
         from dynprop.scenarios.tune.noise import tuned_noise
@@ -145,9 +144,8 @@ def estimate(telemetry, scenario: Scenario | str | Path, truth=None, *,
                 s = _load(owner / "scenario.yaml", items)
         else:
             s = _load(scenario, items)
-        grid, truth_rows, sources = estimate_inputs_of(s, telemetry, truth)
         with staged_run_dir(out) as stage:
-            estimate_to_directory(s, grid, truth_rows, stage, sources)
+            estimate_into(s, telemetry, truth, stage)
             if note is not None:
                 from dynprop.scenarios.tune.noise import note_summary
                 note_summary(stage / "summary.json", note)

@@ -124,9 +124,13 @@ def plot_season(daily: dict[str, np.ndarray], title: str, warnings=()):
     ax = axes[1]
     ax.bar(x, daily["eclipse_min"], width=1.0, color="0.35")
     ax.set_ylabel("eclipse (min/day)")
-    peak = float(np.nanmax(daily["eclipse_min"])) if len(x) else 0.0
+    known = np.isfinite(daily["eclipse_min"])
+    peak = float(np.max(daily["eclipse_min"][known])) if known.any() else 0.0
     ax.set_ylim(0, max(1.0, 1.15 * peak))
-    if not peak > 0:
+    if not known.any():
+        # A telemetry file's days: the shadow is the truth's, which a file lacks.
+        _note(ax, "eclipse not known: the telemetry does not say when it was in shadow")
+    elif not peak > 0:
         _note(ax, "no eclipse on any of these days (outside the eclipse seasons)")
 
     ax = axes[2]

@@ -159,17 +159,15 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_estimate(args) -> int:
-    from .commands import estimate_inputs_of
+    from .commands import estimate_into
     from .files.rundir import check_out_dir, staged_run_dir
-    from .run.estimate import estimate_to_directory
 
     # The telemetry, not the scenario's duration, sets how much is held in memory.
     scenario = load_with_overrides(args, streams=True)
     check_out_dir(args.out, args.force)
     start = time.perf_counter()
-    grid, truth, sources = estimate_inputs_of(scenario, args.telemetry, args.truth)
     with staged_run_dir(args.out, force=args.force) as stage:
-        summary = estimate_to_directory(scenario, grid, truth, stage, sources)
+        summary = estimate_into(scenario, args.telemetry, args.truth, stage)
         _note_tuned(args, stage / "summary.json")
         written = sorted(p.relative_to(stage) for p in stage.rglob("*") if p.is_file())
     from .console import estimate_lines

@@ -50,3 +50,31 @@ def estimate_inputs_of(s: Scenario, telemetry: Path, truth: Path | None):
     sources = {"file": str(Path(telemetry).resolve()),
                "truth_file": None if truth is None else str(Path(truth).resolve())}
     return grid, truth_rows, sources
+
+
+WINDOW_SAMPLES_ENV = "DYNPROP_WINDOW_SAMPLES"   # a test hook: small windows in a subprocess
+
+
+def estimate_into(s: Scenario, telemetry: Path, truth: Path | None, stage: Path,
+                  window_samples: int | None = None) -> dict:
+    """`dynprop estimate` into ``stage``; returns the summary.  Without a truth file the
+    telemetry streams through the run's engine (``run.stream.file_run``), read by
+    range from a scratch copy in the stage (``files.telemetry_source``), so a file of
+    any length fits in memory; every problem with the file is reported before the
+    engine starts.  With one, the record is held whole (``run.estimate``)."""
+    import os
+    sources = {"file": str(Path(telemetry).resolve()),
+               "truth_file": None if truth is None else str(Path(truth).resolve())}
+    if truth is not None:
+        from .run.estimate import estimate_inputs, estimate_to_directory
+        grid, truth_rows = estimate_inputs(s, telemetry, truth)
+        return estimate_to_directory(s, grid, truth_rows, stage, sources)
+    from .files.telemetry_source import open_source
+    from .run.stream.file_run import estimate_stream
+    if window_samples is None and os.environ.get(WINDOW_SAMPLES_ENV):
+        window_samples = int(os.environ[WINDOW_SAMPLES_ENV])
+    source = open_source(telemetry, s, Path(stage) / ".telemetry")
+    try:
+        return estimate_stream(s, source, stage, sources, window_samples)
+    finally:
+        source.close()

@@ -12,7 +12,7 @@ otherwise; sample indices are global (from the run's first sample).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import NamedTuple
 
 import numpy as np
@@ -33,6 +33,15 @@ class Measured(NamedTuple):
     def cut(self, rows: slice) -> Measured:
         """The same telemetry on ``rows`` only (None stays None)."""
         return Measured(*(None if v is None else v[rows] for v in self))
+
+
+class Padding(NamedTuple):
+    """Samples beside a telemetry file's window that its inputs are derived over:
+    their times, telemetry and Earth-sensor pitch (None without one)."""
+
+    t_s: np.ndarray
+    measured: Measured
+    pitch_rad: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -61,7 +70,14 @@ class TruthWindow:
     the Earth sensor's pitch, which the pitch filter and the EKF read), telemetry.csv's
     columns at the output rows, the truth in the model's states and in the pitch
     filter's (θ, θ̇, N_y), the shadow factor and the true 3-1-2 angles (yaw, roll,
-    pitch) at the output rows."""
+    pitch) at the output rows.
+
+    A window of a telemetry file (``run.stream.file_windows``) has no truth (None) and
+    no shadow (None), and brings its own padding: ``lead`` and ``trail``, the samples
+    before and after it that its inputs are derived over, reaching back and on to a
+    sample with every wheel read, so a dropout across the window's edge is bridged as
+    in the whole file; off the scenario's grid ``steps`` holds the interval after
+    each sample."""
 
     index: int
     start: int
@@ -70,10 +86,13 @@ class TruthWindow:
     measured: Measured
     pitch_rad: np.ndarray | None
     tel_rows: dict[str, np.ndarray]
-    truth_model: np.ndarray
-    pitch_truth: np.ndarray
-    shadow: np.ndarray
-    euler_rows: np.ndarray
+    truth_model: np.ndarray | None
+    pitch_truth: np.ndarray | None
+    shadow: np.ndarray | None
+    euler_rows: np.ndarray | None
+    steps: np.ndarray | None = field(default=None, kw_only=True)
+    lead: Padding | None = field(default=None, kw_only=True)
+    trail: Padding | None = field(default=None, kw_only=True)
 
 
 @dataclass(frozen=True)
@@ -97,17 +116,20 @@ class Window(TruthWindow):
 
     params: ModelParams                   # the paper filter's model
     real: FilterHistory
-    nees_real: np.ndarray
+    nees_real: np.ndarray | None
     smoothed_x: np.ndarray | None
     filters: dict[str, FilterHistory]
     pitch: object
-    twin_model: np.ndarray
-    linear: FilterHistory
-    nees_linear: np.ndarray
+    twin_model: np.ndarray | None
+    linear: FilterHistory | None
+    nees_linear: np.ndarray | None
+    smoothed_sigma: np.ndarray | None = field(default=None, kw_only=True)
 
     @classmethod
-    def join(cls, truth: TruthWindow, twin: TwinWindow, **estimates) -> Window:
-        """The truth window with its estimates and its twin."""
+    def join(cls, truth: TruthWindow, twin: TwinWindow | None, **estimates) -> Window:
+        """The truth window with its estimates and its twin (None: a telemetry
+        file's window, which has none)."""
         own = {f.name: getattr(truth, f.name) for f in fields(TruthWindow)}
-        return cls(**own, twin_model=twin.twin_model, linear=twin.linear,
-                   nees_linear=twin.nees_linear, **estimates)
+        return cls(**own, twin_model=None if twin is None else twin.twin_model,
+                   linear=None if twin is None else twin.linear,
+                   nees_linear=None if twin is None else twin.nees_linear, **estimates)

@@ -125,9 +125,13 @@ class PitchResult:
         return np.sqrt(self.P_packed[:, [0, 3, 5]])
 
 
-def _rows(params, noise, dt_or_times, n: int) -> np.ndarray:
+def _rows(params, noise, dt_or_times, n: int, steps=None) -> np.ndarray:
     """Per-step parameter rows (n, 14): a stride-0 view for one fixed Δt, else each
-    distinct interval after sample k (``steps.step_intervals``) evaluated once."""
+    distinct interval after sample k (``steps.step_intervals``, or ``steps`` when
+    given) evaluated once."""
+    if steps is not None:
+        distinct, index = np.unique(np.asarray(steps, dtype=float), return_inverse=True)
+        return _param_rows(discretize(params, noise, distinct))[index]
     if np.ndim(dt_or_times) == 0:
         return np.broadcast_to(_param_rows(discretize(params, noise, float(dt_or_times))),
                                (n, 14))
@@ -139,11 +143,12 @@ def _rows(params, noise, dt_or_times, n: int) -> np.ndarray:
 
 
 def pitch_filter(z, u, dt_or_times, params, noise: PitchNoise, x0, P0, R,
-                 backend: str | None = None) -> PitchResult:
+                 backend: str | None = None, steps=None) -> PitchResult:
     """Kalman filter over a record: Earth-sensor pitch ``z`` (rad, NaN where missing),
     Ḣ ``u`` (N m, rate of the signed H; scalar or (N,)), a fixed Δt (s) or the sample
     times (N,), the prior x0, P0 at the first sample and the pitch variance R (rad²,
-    scalar or (N,))."""
+    scalar or (N,)).  ``steps`` (N,): the interval after each sample, when the record
+    is a stretch of a longer one (its last step reaches the next stretch)."""
     z = np.asarray(z, dtype=float)
     n = len(z)
     u = np.broadcast_to(np.asarray(u, dtype=float), (n,))
@@ -154,7 +159,7 @@ def pitch_filter(z, u, dt_or_times, params, noise: PitchNoise, x0, P0, R,
     x0, P0 = np.asarray(x0, dtype=float), np.asarray(P0, dtype=float)
     if x0.shape != (3,) or P0.shape != (3, 3):
         raise ValueError("x0 must have 3 elements and P0 be 3×3")
-    rows = _rows(params, noise, dt_or_times, n)
+    rows = _rows(params, noise, dt_or_times, n, steps)
     engine = _engine("filter", backend)
     s0 = np.concatenate([x0, pack(0.5 * (P0 + P0.T))])
     inputs = [np.where(present, z, 0.0), present.astype(float), np.where(present, r, 1.0),

@@ -142,16 +142,18 @@ def join_padded(prev_tail: tuple | None, cur: tuple, nxt: tuple | None, pad: int
         ([tuple(None if v is None else v[:pad] for v in nxt)] if nxt is not None else [])
     joined = tuple(None if cur[i] is None else np.concatenate([p[i] for p in pieces])
                    for i in range(len(cur)))
-    lo = 0 if prev_tail is None else pad
+    # A file's window brings padding of its own length (to the nearest wheel reading).
+    lo = 0 if prev_tail is None else len(prev_tail[0])
     return joined, slice(lo, lo + len(cur[0]))
 
 
 def padded_filter_inputs(s: Scenario, params, prev_tail: Measured | None, cur: Measured,
-                         nxt: Measured | None, pad: int):
+                         nxt: Measured | None, pad: int, t_s=None):
     """``filter_inputs`` of a window from its telemetry padded with ``pad`` samples of
-    each neighbour, so the wheel-torque derivative equals the whole run's."""
+    each neighbour, so the wheel-torque derivative equals the whole run's (``t_s``:
+    the padded samples' times, off the grid)."""
     joined, sl = join_padded(prev_tail, cur, nxt, pad)
-    meas, u, extra = filter_inputs(s, params, *joined)
+    meas, u, extra = filter_inputs(s, params, *joined, t_s=t_s)
     meas = type(meas)(*(v[sl] if np.ndim(v) else v for v in
                         (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll, meas.var_yaw,
                          meas.var_h)))

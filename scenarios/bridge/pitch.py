@@ -65,9 +65,10 @@ def pitch_wheel_rate(s: Scenario, speeds, t_s=None) -> np.ndarray:
 
 
 def padded_pitch_wheel_rate(s: Scenario, prev_tail: np.ndarray | None, cur: np.ndarray,
-                            nxt: np.ndarray | None, pad: int) -> np.ndarray:
+                            nxt: np.ndarray | None, pad: int, t_s=None) -> np.ndarray:
     """``pitch_wheel_rate`` of a window's speeds padded with ``pad`` samples of each
-    neighbour (``inputs.join_padded``), so that it equals the whole run's."""
+    neighbour (``inputs.join_padded``), so that it equals the whole run's; ``t_s`` the
+    padded samples' times off the grid."""
     joined, sl = join_padded(None if prev_tail is None else (prev_tail,), (cur,),
                              None if nxt is None else (nxt,), pad)
-    return pitch_wheel_rate(s, joined[0])[sl]
+    return pitch_wheel_rate(s, joined[0], t_s)[sl]

@@ -84,14 +84,19 @@ class ComparisonRows:
         k = rows - a
         at_nees = np.isin(rows, nees_idx)
         pick = np.searchsorted(nees_idx, rows[at_nees])
+        truth, twin = w.truth_model is not None, w.linear is not None
         c = ComparisonInputs(
-            w.params.omega_n_radps, _at(w.real, k), truth_model=w.truth_model[k],
+            w.params.omega_n_radps, _at(w.real, k),
+            truth_model=w.truth_model[k] if truth else None,
             smoothed_x=None if w.smoothed_x is None else w.smoothed_x[k],
-            linear_x=w.linear.x[k], twin_model=w.twin_model[k], true_euler_rad=w.euler_rows,
+            linear_x=w.linear.x[k] if twin else None,
+            twin_model=w.twin_model[k] if twin else None, true_euler_rad=w.euler_rows,
             filters={name: _at(h, k) for name, h in w.filters.items()},
             pitch=_pitch_at(w, k, pick))
         present = np.isfinite(w.measured.yaw_rad[k])
-        nees_data = (np.flatnonzero(at_nees), w.nees_real[pick], w.nees_linear[pick])
+        nees_data = (np.flatnonzero(at_nees),
+                     None if w.nees_real is None else w.nees_real[pick],
+                     None if w.nees_linear is None else w.nees_linear[pick])
         arrays = comparison_arrays(c, w.t_s[k], present, nees_data, w.tel_rows)
         lo = rows[0] // self.stride if len(rows) else None
         for key, v in arrays.items():
@@ -108,17 +113,24 @@ class ComparisonRows:
         # reduction, on the rows kept, not before.
         f = display_factors(w.params.omega_n_radps)
         samples = np.arange(a, a + n)
-        if err is None:
+        truth, twin = w.truth_model is not None, w.linear is not None
+        if err is None and truth:
             err = w.real.x - w.truth_model
-        if err_lin is None:
+        if err_lin is None and twin:
             err_lin = w.linear.x - w.twin_model
-        series = {"err_real": (samples, err, f), "err_linear": (samples, err_lin, f),
-                  "err_real_minus_linear": (samples, (err - err_lin)[:, DIFF_COLS],
-                                            f[DIFF_COLS]),
-                  "nees_linear": (nees_idx, w.nees_linear, None)}
-        if w.smoothed_x is not None:
+        series = {}
+        if truth:
+            series["err_real"] = (samples, err, f)
+        if twin:
+            series["err_linear"] = (samples, err_lin, f)
+            if truth:
+                series["err_real_minus_linear"] = (samples, (err - err_lin)[:, DIFF_COLS],
+                                                   f[DIFF_COLS])
+            series["nees_linear"] = (nees_idx, w.nees_linear, None)
+        if w.smoothed_x is not None and truth:
             series["err_smoothed"] = (samples, w.smoothed_x - w.truth_model, f)
-        series["nees_real"] = (nees_idx, w.nees_real, None)
+        if truth:
+            series["nees_real"] = (nees_idx, w.nees_real, None)
         p = w.pitch
         if p is not None and p.nees is not None:
             series["err_pitch"] = (samples, p.x - w.pitch_truth, PITCH_FACTORS)

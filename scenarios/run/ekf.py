@@ -58,8 +58,12 @@ class EkfStream:
         return (*w.measured, w.pitch_rad)
 
     def window(self, cur: TruthWindow, nxt: TruthWindow | None, pad: int) -> EkfResult:
-        inputs = padded_ekf_inputs(self.s, self.params, self.prev_tail, self._telemetry(cur),
-                                   None if nxt is None else self._telemetry(nxt), pad)
+        prev, after = self.prev_tail, None if nxt is None else self._telemetry(nxt)
+        if cur.lead is not None:
+            # A telemetry file's window, with its own padding (``records.TruthWindow``).
+            prev = (*cur.lead.measured, cur.lead.pitch_rad)
+            after, pad = (*cur.trail.measured, cur.trail.pitch_rad), len(cur.trail.t_s)
+        inputs = padded_ekf_inputs(self.s, self.params, prev, self._telemetry(cur), after, pad)
         r = ekf_filter(inputs, self.pm, self.wn, self.X, self.P)
         self.X, self.P = r.x_next, r.P_next
         self.prev_tail = tuple(None if v is None else v[-pad:] for v in self._telemetry(cur))

@@ -59,51 +59,92 @@ class Mean:
 
 class GapTracker:
     """Sun gaps (``samples.sun_gaps``) found as the windows pass: a yaw outage of at
-    least ``min_s``; its end is the first sample with yaw again."""
+    least ``min_s``; its end is the first sample with yaw again.  With ``step_s`` (a
+    file off the grid, whose median step it is) gaps are measured in time, as
+    ``samples.sun_gaps_at`` measures them, and ``hours`` holds each one's (start, end)
+    in hours from ``t0_s``."""
 
-    def __init__(self, dt_s: float, min_s: float):
-        self.dt_s, self.min_s = dt_s, min_s
+    def __init__(self, dt_s: float, min_s: float, step_s: float | None = None,
+                 t0_s: float = 0.0):
+        self.dt_s, self.min_s, self.step, self.t0 = dt_s, min_s, step_s, t0_s
         self.open_since: int | None = None
         self.gaps: list[tuple[int, int]] = []
+        self.hours: list[list[float]] = []
+        self.open_at = self.last_t = None   # (time before, start time) of the open gap
 
-    def _long(self, a: int, b: int) -> bool:
-        return (b - a) * self.dt_s >= self.min_s   # the predicate of samples.sun_gaps
+    def _long(self, a: int, b: int, times=None) -> bool:
+        if times is None:
+            return (b - a) * self.dt_s >= self.min_s   # the predicate of samples.sun_gaps
+        before, _, after = times
+        return after - before - self.step >= self.min_s
 
-    def add(self, start: int, present: np.ndarray) -> list[tuple[int, int]]:
-        """The gaps (global first missing, first present again) closing in this window."""
+    def add(self, start: int, present: np.ndarray, t_s=None) -> list[tuple[int, int]]:
+        """The gaps (global first missing, first present again) closing in this window
+        (``t_s``: its samples' times, off the grid)."""
         missing = ~np.asarray(present, dtype=bool)
         n = len(missing)
-        closed = []
+        timed = self.step is not None
+        closed, times = [], []
+
+        def opened(a: int) -> tuple[float, float]:
+            # The time of the last sample before the gap, and of its first.
+            k = a - start
+            before = t_s[k - 1] if k > 0 else (self.last_t if self.last_t is not None
+                                               else t_s[0] - self.step)
+            return before, t_s[k]
+
         if n and self.open_since is not None and not missing[0]:
             closed.append((self.open_since, start))     # closed at the window's start
+            times.append((*self.open_at, t_s[0]) if timed else None)
             self.open_since = None
         edges = start + np.flatnonzero(np.diff(np.r_[0, missing.astype(int), 0]))
         for a, b in zip(edges[::2], edges[1::2], strict=True):
             a, b = int(a), int(b)
-            if a == start and self.open_since is not None:
+            carried = a == start and self.open_since is not None
+            at = self.open_at if carried else (opened(a) if timed else None)
+            if carried:
                 a = self.open_since
             self.open_since = None
             if b == start + n:              # still open at the window's end
-                self.open_since = a
+                self.open_since, self.open_at = a, at
                 break
             closed.append((a, b))
-        closed = [(a, b) for a, b in closed if self._long(a, b)]
+            times.append((*at, t_s[b - start]) if timed else None)
+        if timed and n:
+            self.last_t = t_s[-1]
+        keep = [self._long(a, b, tm) for (a, b), tm in zip(closed, times, strict=True)]
+        if timed:
+            self.hours.extend([float(tm[1] - self.t0) / 3600, float(tm[2] - self.t0) / 3600]
+                              for tm, k in zip(times, keep, strict=True) if k)
+        closed = [g for g, k in zip(closed, keep, strict=True) if k]
         self.gaps.extend(closed)
         return closed
 
     def finish(self, n: int) -> None:
-        if self.open_since is not None and self._long(self.open_since, n):
-            self.gaps.append((self.open_since, n))
+        if self.open_since is not None:
+            if self.step is None:
+                if self._long(self.open_since, n):
+                    self.gaps.append((self.open_since, n))
+            else:
+                before, first = self.open_at
+                end = self.last_t + self.step
+                if self._long(self.open_since, n, (before, first, end)):
+                    self.gaps.append((self.open_since, n))
+                    self.hours.append([float(first - self.t0) / 3600,
+                                       float(end - self.t0) / 3600])
         self.open_since = None
 
 
 class RunTally:
     """summary.json's statistics over a streamed run (see the module doc)."""
 
-    def __init__(self, s, truth: bool = True, twin: bool = True):
+    def __init__(self, s, truth: bool = True, twin: bool = True, step_s: float | None = None,
+                 t0_s: float = 0.0):
+        """``step_s``, ``t0_s``: a file off the grid (``GapTracker``)."""
         self.s, self.truth, self.twin = s, truth, twin
         dt = s.sample_interval_s
-        self.gaps = GapTracker(dt, s.estimator.sun_gap_min_h * HOUR_S)
+        self.t0 = t0_s
+        self.gaps = GapTracker(dt, s.estimator.sun_gap_min_h * HOUR_S, step_s, t0_s)
         self.rms = {k: Rms() for k in ("yaw", "roll", "h", "yaw_linear", "yaw_smoothed")}
         self.cmp = {k: (Rms(), Rms(), Rms()) for k in ("roll_deg", "yaw_deg", "h_Nms")}
         self.max_diff = {k: 0.0 for k in self.cmp}
@@ -126,7 +167,7 @@ class RunTally:
         sig = real.sigma
         nees_real, nees_lin = w.nees_real, w.nees_linear
         present = np.isfinite(w.measured.yaw_rad)
-        closed = self.gaps.add(a, present)
+        closed = self.gaps.add(a, present, w.t_s)
         for _, b in closed:
             k = b - a
             self.ends["sigma"].append(float(sig[k, Y] * RAD2DEG))
@@ -150,7 +191,7 @@ class RunTally:
             self.per_state = self.per_state + np.sum(ratio, axis=0)
             self.per_state_n += len(ratio)
             self._nees("real", nees_real)
-            self.nees_settled.add(nees_real[nees_idx * self.s.sample_interval_s >= SETTLED_S])
+            self.nees_settled.add(nees_real[self._settled(w, nees_idx)])
             top = truth_extremes(w.truth_model, w.t_s)
             self.truth_max = {k: max(self.truth_max[k], top[k], key=lambda v: v[0])
                               for k in top}
@@ -168,6 +209,12 @@ class RunTally:
                     diff.add(d)
                     self.max_diff[name] = max(self.max_diff[name], float(np.max(np.abs(d))))
         return closed
+
+    def _settled(self, w: Window, idx) -> np.ndarray:
+        """Which of the samples ``idx`` are past the start-up (by time off the grid)."""
+        if self.gaps.step is None:
+            return idx * self.s.sample_interval_s >= SETTLED_S
+        return w.t_s[idx - w.start] - self.t0 >= SETTLED_S
 
     def _nees(self, name: str, values) -> None:
         self.nees[name].total += np.sum(values)

@@ -18,23 +18,14 @@ import time
 from itertools import islice
 from pathlib import Path
 
-import numpy as np
-
 from ...config import build
 from ...config.schema import Scenario, output_writes_telemetry, resolved_yaml
 from ...files.checks import add_checks
-from ...files.columns import estimate_columns, pitch_columns
-from ...files.csvio import CsvAppender, write_csv
-from ...files.decimate import ComparisonRows
-from ...files.summary import assemble_summary, eq55_sigma_yaw_deg, write_summary
-from ...samples import nees_rows, output_rows
+from ...files.summary import assemble_summary, write_summary
 from ...units import DAY_S
 from ...workers import blas_one_thread
-from ..daily import DailyTally
-from ..filter_tally import FilterTally
-from ..filtering import count_rejected, design_of, filter_section
-from ..pitch import PitchTally
-from ..tally import RunTally
+from ..filtering import design_of, filter_section
+from .engine import Engine
 from .process import producer_process
 from .producer import producer
 from .windows import windows_of
@@ -45,14 +36,14 @@ LOG_EVERY_DAYS = 10
 class Progress:
     """Simulated days: a tqdm bar on a terminal, else a line every LOG_EVERY_DAYS."""
 
-    def __init__(self, total_days: float, enabled: bool):
-        self.total, self.enabled = total_days, enabled
+    def __init__(self, total_days: float, enabled: bool, verb: str = "simulated"):
+        self.total, self.enabled, self.verb = total_days, enabled, verb
         self.bar = None
         self.start = time.perf_counter()
         self.next_log = LOG_EVERY_DAYS
         if enabled and sys.stderr.isatty():
             from tqdm import tqdm
-            self.bar = tqdm(total=round(total_days, 3), unit="day", desc="simulated",
+            self.bar = tqdm(total=round(total_days, 3), unit="day", desc=verb,
                             leave=False, file=sys.stderr,
                             bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} d "
                                        "[{elapsed}<{remaining}]")
@@ -65,7 +56,7 @@ class Progress:
         elif done_days + 1e-9 >= self.next_log or done_days + 1e-9 >= self.total:
             wall = time.perf_counter() - self.start
             eta = wall / done_days * (self.total - done_days)
-            print(f"dynprop: {done_days:.1f} of {self.total:.1f} days simulated, "
+            print(f"dynprop: {done_days:.1f} of {self.total:.1f} days {self.verb}, "
                   f"{wall:.0f} s, about {eta:.0f} s to go", file=sys.stderr, flush=True)
             while self.next_log <= done_days + 1e-9:
                 self.next_log += LOG_EVERY_DAYS
@@ -98,17 +89,9 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     params, _ = build.estimator_model(s)
     dt = s.sample_interval_s
     n = plan.n_samples
-    tally = RunTally(s)
-    pitch = PitchTally(s)
-    daily = DailyTally(s, build.epoch(s), n, eq55_sigma_yaw_deg(s, params))
-    comparison = ComparisonRows(stage / ".comparison", n, plan.stride)
-    estimate = CsvAppender(stage / "estimate.csv")
-    # Filters beside the paper's (estimator.filters): their tallies and estimate file.
-    extra = {name: (FilterTally(name), CsvAppender(stage / f"estimate_{name}.csv"))
-             for name in s.estimator.filters if name != "paper"}
+    engine = Engine(s, stage, plan)
     bar = Progress(n * dt / DAY_S, progress and len(plan.bounds) > 1)
     design = design_of(s)
-    last_bias, rejected = None, np.zeros(6, dtype=np.int64)
     # The figures need only comparison.npz and daily.csv, so they are drawn while the
     # producer writes the last of its files; a steered run's figure also reads the
     # file the producer writes (trim_loop.csv), so that run draws after it.
@@ -117,15 +100,16 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
     def finished() -> dict:
         """summary.json, written, once every window is in (and a steered run's
         producer has written its trim_loop.csv)."""
+        tally = engine.tally
         summary = assemble_summary(s, params, tally.backend, True, True, tally.statistics(n))
         summary.update(output_interval_s=plan.stride * dt, telemetry_written=tel_file,
                        daily="daily.csv")
         summary["filters"] = list(s.estimator.filters)   # the paper's alone elsewhere
-        summary.update(filter_section(s, design, last_bias, rejected,
+        summary.update(filter_section(s, design, engine.last_bias, engine.rejected,
                                       build.truth_biases_rad(s)))
-        for name, (figs, _) in extra.items():
+        for name, (figs, _) in engine.extra.items():
             summary[name] = figs.summary()
-        summary["pitch"] = pitch.summary()
+        summary["pitch"] = engine.pitch.summary()
         if steering is not None:
             summary.update(steering.summary(stage))
         write_summary(stage / "summary.json", add_checks(summary))
@@ -135,32 +119,11 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         # The windows' records, and not one more: asking for the next would wait for
         # the producer to finish its files (stream.windows_of drains it there).
         for w in islice(records, len(plan.bounds)):
-            err = w.real.x - w.truth_model
-            err_lin = w.linear.x - w.twin_model
-            nees_idx = nees_rows(w.start, w.stop)
-            closed = tally.add(w, err, err_lin, nees_idx)
-            daily.add(w, err, err_lin, nees_idx, closed)
-            comparison.add(w, nees_idx, err, err_lin)
-            k = output_rows(w.start, w.stop, plan.stride) - w.start
-            bias = w.real.bias_columns or {}
-            estimate.append(estimate_columns(w.t_s[k], w.real.x[k], w.real.sigma[k],
-                                             params.omega_n_radps)
-                            | {name: v[k] for name, v in bias.items()}
-                            | pitch_columns(w.pitch.x[k], w.pitch.sigma[k]))
-            pitch.add(w.pitch, w.start, w.t_s, w.pitch_truth)
-            if bias:
-                last_bias = {name: v[-1] for name, v in bias.items()}
-            if w.real.rejected is not None:
-                rejected = rejected + count_rejected(w.real.rejected, w.measured.sun_head)
-            for name, (figs, file) in extra.items():
-                figs.add(w.filters[name], w.start, w.truth_model, closed, w.t_s)
-                file.append(estimate_columns(w.t_s[k], w.filters[name].x[k],
-                                             w.filters[name].sigma[k], params.omega_n_radps))
+            engine.add(w)
             bar.update(w.stop * dt / DAY_S)
-            del w, err, err_lin
+            del w
         bar.close()
-        comparison.finish(stage / "comparison.npz", plan.stride * dt)
-        write_csv(stage / "daily.csv", daily.columns())
+        engine.finish(plan.stride * dt)
         if overlap:
             # summary.json before the figures: they draw its verdicts and warnings.
             summary = finished()
@@ -172,9 +135,7 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         # interrupted run's second process is gone before its stage is removed.
         records.close()
         source.close()
-        estimate.close()
-        for _, file in extra.values():
-            file.close()
+        engine.close()
         bar.close()
     if not overlap:
         summary = finished()

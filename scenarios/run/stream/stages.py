@@ -14,6 +14,7 @@ import numpy as np
 from dynprop.estimator.ekf.filter import EkfResult
 from dynprop.estimator.kalman.consistency import nees
 from dynprop.estimator.kalman.filter import ExtraNoise, FilterResult, unpack
+from dynprop.estimator.linear.steps import StepTable
 from dynprop.estimator.linear.transition import discretize
 
 from ...bridge.inputs import initial_prior, padded_filter_inputs
@@ -22,7 +23,15 @@ from ...config.schema import Scenario
 from ...records import FilterHistory, TruthWindow
 from ...samples import nees_rows
 from ..ekf import EkfStream
-from ..filtering import bias_columns, design_of, head, paper_filter, paper_smoother, smoothed_full_x
+from ..filtering import (
+    bias_columns,
+    design_of,
+    head,
+    paper_filter,
+    paper_smoother,
+    smoothed_full_P,
+    smoothed_full_x,
+)
 from ..pitch import PitchHistory, PitchStream
 
 
@@ -36,7 +45,8 @@ class Filtered:
     u: np.ndarray
     extra: ExtraNoise | None
     ekf: EkfResult | None
-    pitch: PitchHistory
+    pitch: PitchHistory | None
+    disc: object                # the window's Φ, Γ, Q_d (one step, or a StepTable)
 
 
 def filtered(s: Scenario, records):
@@ -56,21 +66,33 @@ def filtered(s: Scenario, records):
         # The last window needs no look-ahead (and waiting for the stream's end would
         # hold it up until the producer is done with its files).
         nxt = None if plan.is_last(cur.index) else next(records, None)
-        meas, u, extra = padded_filter_inputs(s, params, prev_tail, cur.measured,
-                                              None if nxt is None else nxt.measured, plan.pad)
-        result = paper_filter(design, meas, disc, *prior, u=u, extra=extra,
+        # A file's window brings its own padding (``records.TruthWindow``); a run's
+        # is its neighbours' samples.
+        own = cur.lead is not None
+        lead = cur.lead.measured if own else prev_tail
+        trail = cur.trail.measured if own else None if nxt is None else nxt.measured
+        pad = len(cur.trail.t_s) if own else plan.pad
+        t_pad = None if cur.steps is None else np.concatenate(
+            [cur.lead.t_s, cur.t_s, cur.trail.t_s])
+        meas, u, extra = padded_filter_inputs(s, params, lead, cur.measured, trail, pad, t_pad)
+        w_disc = disc if cur.steps is None else StepTable(params, noise, cur.steps)
+        result = paper_filter(design, meas, w_disc, *prior, u=u, extra=extra,
                               sun_head=cur.measured.sun_head)
         prior = (result.x_next, result.P_next)
         e = None if ekf is None else ekf.window(cur, nxt, plan.pad)
         # Reduced at once to what the files and tallies read (its covariance history
         # is not kept): the NEES on the NEES samples against the window's truth.
-        p = PitchHistory.of(pitch.window(cur.pitch_rad, cur.measured.speeds_radps,
-                                         None if nxt is None else nxt.measured.speeds_radps,
-                                         plan.pad),
-                            cur.pitch_truth, nees_rows(cur.start, cur.stop) - cur.start)
+        p = None
+        if cur.pitch_rad is not None:
+            speeds = cur.measured.speeds_radps
+            r = pitch.window(cur.pitch_rad, speeds,
+                             trail.speeds_radps if trail is not None else None, pad,
+                             lead=cur.lead.measured.speeds_radps if own else None,
+                             t_s=t_pad, steps=cur.steps)
+            p = PitchHistory.of(r, cur.pitch_truth, nees_rows(cur.start, cur.stop) - cur.start)
         # The next window's derivative needs only the last samples of this one.
         prev_tail = cur.measured.cut(slice(-plan.pad, None))
-        yield Filtered(cur, result, u, extra, e, p)
+        yield Filtered(cur, result, u, extra, e, p, w_disc)
         cur = nxt
 
 
@@ -83,13 +105,15 @@ class Smoothed:
 
     window: TruthWindow
     real: FilterHistory
-    nees_real: np.ndarray
+    nees_real: np.ndarray | None
     smoothed_x: np.ndarray | None
     filters: dict[str, FilterHistory]
-    pitch: PitchHistory
+    pitch: PitchHistory | None
+    smoothed_sigma: np.ndarray | None = None
 
 
-def _lighten(f: Filtered, smoothed_x: np.ndarray | None) -> Smoothed:
+def _lighten(f: Filtered, smoothed_x: np.ndarray | None,
+             smoothed_sigma: np.ndarray | None = None) -> Smoothed:
     w, real = f.window, f.real
     k = nees_rows(w.start, w.start + len(w.t_s)) - w.start
     filters = {}
@@ -100,33 +124,42 @@ def _lighten(f: Filtered, smoothed_x: np.ndarray | None) -> Smoothed:
     return Smoothed(w, FilterHistory(real.x, real.sigma, real.innovations, real.innovation_var,
                                      real.backend, None, bias_columns(real, slice(None)),
                                      getattr(real, "rejected", None)),
+                    None if w.truth_model is None else
                     nees(real.x[k], unpack(real.P_packed[k]), w.truth_model[k]), smoothed_x,
-                    filters, f.pitch)
+                    filters, f.pitch, smoothed_sigma)
 
 
-def smoothed(s: Scenario, records, smooth: bool = True):
+def smoothed(s: Scenario, records, smooth: bool = True, covariance: bool = False):
     """The RTS smoother over each window and ``plan.overlap`` samples of the next
-    (one window: the whole run, exactly ``rts_smoother``)."""
+    (one window: the whole run, exactly ``rts_smoother``).  ``covariance``: with the
+    smoothed 1σ too (a telemetry file's smoothed.csv), continued across windows from
+    the overlap's smoothed covariance."""
     plan = next(records)
     yield plan
-    params, noise = build.estimator_model(s)
-    disc = discretize(params, noise, s.sample_interval_s)
     design = design_of(s)
     cur = next(records, None)
     while cur is not None:
         nxt = None if plan.is_last(cur.window.index) else next(records, None)
-        x = None
+        x = sigma = None
         if smooth:
-            x_after = None
+            after = {}
             if nxt is not None:
                 # The overlap first, from its filtered end; then this window from the
                 # smoothed state where the overlap begins (no joined copy of the two).
                 m = min(plan.overlap, len(nxt.window.t_s))
-                x_after = smoothed_full_x(paper_smoother(
-                    design, head(nxt.real, m), disc, u=nxt.u[:m], covariance=False,
+                d = nxt.disc if not isinstance(nxt.disc, StepTable) else \
+                    nxt.disc.cut(slice(0, m))
+                o = paper_smoother(
+                    design, head(nxt.real, m), d, u=nxt.u[:m], covariance=covariance,
                     extra=None if nxt.extra is None else ExtraNoise(nxt.extra.scale[:m],
-                                                                    nxt.extra.Qd_unit)))[0]
-            x = paper_smoother(design, cur.real, disc, u=cur.u, extra=cur.extra,
-                               covariance=False, x_after=x_after).x
-        yield _lighten(cur, x)
+                                                                    nxt.extra.Qd_unit))
+                after = {"x_after": smoothed_full_x(o)[0]}
+                if covariance:
+                    after["P_after"] = smoothed_full_P(o)[0]
+            r = paper_smoother(design, cur.real, cur.disc, u=cur.u, extra=cur.extra,
+                               covariance=covariance, **after)
+            x = r.x
+            if covariance:
+                sigma = r.sigma
+        yield _lighten(cur, x, sigma)
         cur = nxt
