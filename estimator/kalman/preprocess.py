@@ -158,24 +158,33 @@ def cadence(t_s) -> float:
     return float(np.median(np.diff(np.asarray(t_s, dtype=float))))
 
 
-def _uniform(t: np.ndarray, dt: float) -> np.ndarray:
-    return t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
+def _uniform(t: np.ndarray, dt: float, origin: float | None = None) -> np.ndarray:
+    """Times origin + k·dt covering [t[0], t[-1]] (origin: t[0] when None).  A stretch
+    of a longer record passes the record's origin, so its points are the record's."""
+    if origin is None:
+        return t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
+    k0 = int(np.ceil((t[0] - origin) / dt - 1e-9))
+    k1 = int(np.floor((t[-1] - origin) / dt + 1e-9))
+    return origin + dt * np.arange(k0, k1 + 1)
 
 
-def wheel_torque_at(t_s, h_Nms, window_s: float = 20.0) -> np.ndarray:
+def wheel_torque_at(t_s, h_Nms, window_s: float = 20.0, cadence_s: float | None = None,
+                    origin_s: float | None = None) -> np.ndarray:
     """N_w* held over each step [t_k, t_{k+1}] of samples at any times: the mean of
     ḣ over the step, the constant input that carries h across it (Eq. 31 holds ū
     over the step).  ḣ is ``wheel_torque``'s Savitzky–Golay derivative of h
     resampled linearly onto the file's own cadence (``cadence``), so across a gap it
     is the bridge's Δh/Δt, as on the grid; its running integral, read at the sample
-    times, gives each step's mean.  The last sample gets the step before it."""
+    times, gives each step's mean.  The last sample gets the step before it.  A
+    stretch of a longer record (a streamed window) passes the record's cadence and
+    first time (``cadence_s``, ``origin_s``), so it resamples onto the record's points."""
     t = np.asarray(t_s, dtype=float)
     h = np.asarray(h_Nms, dtype=float)
     ok = np.isfinite(h)
     if not (ok[0] and ok[-1]):
         raise ValueError("the wheel speeds of the first and last samples must be present")
-    dt = cadence(t)
-    grid = _uniform(t, dt)
+    dt = cadence(t) if cadence_s is None else cadence_s
+    grid = _uniform(t, dt, origin_s)
     rate = wheel_torque(np.interp(grid, t[ok], h[ok]), dt, window_s)
     integral = np.r_[0.0, np.cumsum(0.5 * (rate[1:] + rate[:-1]) * dt)]
     # The integral at the samples (the last ones may lie past the grid's end by < dt).
@@ -186,7 +195,8 @@ def wheel_torque_at(t_s, h_Nms, window_s: float = 20.0) -> np.ndarray:
     return np.r_[nw, nw[-1]]
 
 
-def dropout_wheel_noise_at(t_s, h_Nms, var_h: float, gap_factor: float = 1.5
+def dropout_wheel_noise_at(t_s, h_Nms, var_h: float, gap_factor: float = 1.5,
+                           cadence_s: float | None = None, origin_s: float | None = None
                            ) -> np.ndarray | None:
     """``dropout_wheel_noise`` for samples at any times: per-step q_w ((N m)² s) on each
     step longer than ``gap_factor`` × the file's cadence (a dropout, or a missing
@@ -194,17 +204,18 @@ def dropout_wheel_noise_at(t_s, h_Nms, var_h: float, gap_factor: float = 1.5
     takes the q_w that straight-line bridges of T leave at their middle, measured on
     the file resampled to its cadence at the nearest sample (not interpolated, which
     would average the tachometer noise away): a jitter of tens of ms moves a bridge
-    of minutes by nothing that matters."""
+    of minutes by nothing that matters.  ``cadence_s``, ``origin_s``: as
+    ``wheel_torque_at``'s."""
     t = np.asarray(t_s, dtype=float)
     h = np.asarray(h_Nms, dtype=float)
     ok = np.isfinite(h)
-    dt = cadence(t)
+    dt = cadence(t) if cadence_s is None else cadence_s
     tk, hk = t[ok], h[ok]
     span = np.diff(tk)
     gaps = span > gap_factor * dt
     if not gaps.any():
         return None
-    grid = _uniform(t, dt)
+    grid = _uniform(t, dt, origin_s)
     j = np.clip(np.searchsorted(tk, grid), 1, len(tk) - 1)
     j = np.where(grid - tk[j - 1] < tk[j] - grid, j - 1, j)
     near = np.where(np.abs(tk[j] - grid) <= 0.5 * dt, hk[j], np.nan)
@@ -227,18 +238,22 @@ def dropout_wheel_noise_at(t_s, h_Nms, var_h: float, gap_factor: float = 1.5
 
 def prepare_at_times(params: ModelParams, t_s, roll_rad, yaw_rad, wheel_speeds_radps,
                      yaw_factors, sensors: SensorSpecs = PAPER_SENSORS, yaw_sigma_rad=None,
-                     Nx_model_Nm=0.0, Nz_model_Nm=0.0, nw_window_s: float = 20.0
+                     Nx_model_Nm=0.0, Nz_model_Nm=0.0, nw_window_s: float = 20.0,
+                     cadence_s: float | None = None, origin_s: float | None = None
                      ) -> FilterInputs:
     """``prepare`` for samples at their own times ``t_s`` (any cadence, jitter, gaps):
     the same measurements, with N_w* each step's mean (``wheel_torque_at``) and the
-    dropout noise per step (``dropout_wheel_noise_at``)."""
+    dropout noise per step (``dropout_wheel_noise_at``); ``cadence_s``, ``origin_s``
+    those of the record a stretch ``t_s`` is of (``wheel_torque_at``)."""
     t = np.asarray(t_s, dtype=float)
-    base = prepare(params, cadence(t), roll_rad, yaw_rad, wheel_speeds_radps, yaw_factors,
+    dt = cadence(t) if cadence_s is None else cadence_s
+    base = prepare(params, dt, roll_rad, yaw_rad, wheel_speeds_radps, yaw_factors,
                    sensors, yaw_sigma_rad, Nx_model_Nm, Nz_model_Nm, nw_window_s)
     meas = base.measurements
-    nw = wheel_torque_at(t, meas.h_Nms, nw_window_s)
+    nw = wheel_torque_at(t, meas.h_Nms, nw_window_s, dt, origin_s)
     u = input_vector(params, Nx_model_Nm, Nz_model_Nm, nw) * np.ones((len(t), 1))
-    return FilterInputs(meas, u, dropout_wheel_noise_at(t, meas.h_Nms, float(meas.var_h)))
+    return FilterInputs(meas, u, dropout_wheel_noise_at(t, meas.h_Nms, float(meas.var_h),
+                                                        cadence_s=dt, origin_s=origin_s))
 
 
 def earth_pitch(pitch_rad, dt_s: float, window_s: float = 20.0) -> np.ndarray:

@@ -69,15 +69,18 @@ def yaw_correlation_inflation(s: Scenario, sun_head, dt_s: float | None = None) 
 
 
 def prepared_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
-                    known_Nm=None, t_s=None):
+                    known_Nm=None, t_s=None, record: tuple[float, float] | None = None):
     """Telemetry arrays to the filter's measurements and inputs
     (``estimator.preprocess.FilterInputs``, with a dropout's measured wheel noise).
     ``known_Nm`` (N, 2), roll and yaw torques known per sample, joins the modelled
     N_x*, N_z* (Eq. 9).  ``t_s``: the samples' own times, for telemetry off the
-    scenario's grid (``estimator.linear.steps``); None on the grid."""
+    scenario's grid (``estimator.linear.steps``); None on the grid.  ``record``: the
+    cadence and first time of the file ``t_s`` is a window of (its N_w* resampled onto
+    the file's points, ``preprocess.wheel_torque_at``); None: ``t_s``'s own."""
     e = s.estimator
+    cadence_s, origin_s = (None, None) if record is None else record
     if yaw_sigma is not None and sun_head is not None:
-        dt = None if t_s is None else cadence(t_s)
+        dt = None if t_s is None else cadence(t_s) if cadence_s is None else cadence_s
         yaw_sigma = np.asarray(yaw_sigma) * np.sqrt(yaw_correlation_inflation(s, sun_head, dt))
     nx, nz = e.model_torques.roll_Nm, e.model_torques.yaw_Nm
     if known_Nm is not None:
@@ -85,20 +88,20 @@ def prepared_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_
     if t_s is not None:
         return prepare_at_times(params, t_s, roll, yaw, speeds, build.yaw_factors(s),
                                 build.estimator_sensor_specs(s), yaw_sigma, nx, nz,
-                                e.wheel_torque_window_s)
+                                e.wheel_torque_window_s, cadence_s, origin_s)
     return prepare(params, s.sample_interval_s, roll, yaw, speeds, build.yaw_factors(s),
                    build.estimator_sensor_specs(s), yaw_sigma, nx, nz, e.wheel_torque_window_s)
 
 
 def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
-                  known_Nm=None, t_s=None):
+                  known_Nm=None, t_s=None, record=None):
     """Telemetry arrays to the filter's measurements, inputs u and any dropout noise
     (``ExtraNoise`` or None); ``prepared_inputs`` says what each is.  With ``t_s`` the
     dropout noise's unit matrix is each step's own (``estimator.steps.StepTable``), and
     ``ExtraNoise.Qd_unit`` is not used."""
     e = s.estimator
     inputs = prepared_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm,
-                             t_s)
+                             t_s, record)
     extra = None
     if inputs.wheel_noise is not None:
         unit = np.zeros((em.N_STATES, em.N_STATES)) if t_s is not None else discretize(
@@ -148,12 +151,13 @@ def join_padded(prev_tail: tuple | None, cur: tuple, nxt: tuple | None, pad: int
 
 
 def padded_filter_inputs(s: Scenario, params, prev_tail: Measured | None, cur: Measured,
-                         nxt: Measured | None, pad: int, t_s=None):
+                         nxt: Measured | None, pad: int, t_s=None, record=None):
     """``filter_inputs`` of a window from its telemetry padded with ``pad`` samples of
     each neighbour, so the wheel-torque derivative equals the whole run's (``t_s``:
-    the padded samples' times, off the grid)."""
+    the padded samples' times, off the grid, and ``record`` their file's cadence and
+    first time, ``prepared_inputs``')."""
     joined, sl = join_padded(prev_tail, cur, nxt, pad)
-    meas, u, extra = filter_inputs(s, params, *joined, t_s=t_s)
+    meas, u, extra = filter_inputs(s, params, *joined, t_s=t_s, record=record)
     meas = type(meas)(*(v[sl] if np.ndim(v) else v for v in
                         (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll, meas.var_yaw,
                          meas.var_h)))

@@ -52,7 +52,7 @@ def pitch_design(s: Scenario) -> PitchDesign:
                        np.diag(sig**2), roll_variance(build.estimator_sensor_specs(s)))
 
 
-def pitch_wheel_rate(s: Scenario, speeds, t_s=None) -> np.ndarray:
+def pitch_wheel_rate(s: Scenario, speeds, t_s=None, record=None) -> np.ndarray:
     """Ḣ (N m) of the signed pitch-wheel momentum from the wheel speeds (N, n; NaN in a
     dropout); ``t_s`` the samples' own times for telemetry off the grid."""
     H = yaw_momentum(speeds, build.build_spacecraft(s).momentum_factors(1))
@@ -61,14 +61,17 @@ def pitch_wheel_rate(s: Scenario, speeds, t_s=None) -> np.ndarray:
         return wheel_torque(H, s.sample_interval_s, window)
     ok = np.isfinite(H)
     k = np.arange(len(H))
-    return wheel_torque_at(t_s, np.interp(k, k[ok], H[ok]), window)
+    return wheel_torque_at(t_s, np.interp(k, k[ok], H[ok]), window,
+                           *(record if record is not None else ()))
 
 
 def padded_pitch_wheel_rate(s: Scenario, prev_tail: np.ndarray | None, cur: np.ndarray,
-                            nxt: np.ndarray | None, pad: int, t_s=None) -> np.ndarray:
+                            nxt: np.ndarray | None, pad: int, t_s=None, record=None
+                            ) -> np.ndarray:
     """``pitch_wheel_rate`` of a window's speeds padded with ``pad`` samples of each
     neighbour (``inputs.join_padded``), so that it equals the whole run's; ``t_s`` the
-    padded samples' times off the grid."""
+    padded samples' times off the grid (``record``: their file's cadence and first
+    time, ``inputs.prepared_inputs``')."""
     joined, sl = join_padded(None if prev_tail is None else (prev_tail,), (cur,),
                              None if nxt is None else (nxt,), pad)
-    return pitch_wheel_rate(s, joined[0], t_s)[sl]
+    return pitch_wheel_rate(s, joined[0], t_s, record)[sl]

@@ -47,14 +47,15 @@ class PitchStream:
         self.prev_tail: np.ndarray | None = None
 
     def window(self, pitch_rad: np.ndarray, speeds: np.ndarray, next_speeds, pad: int,
-               lead: np.ndarray | None = None, t_s=None, steps=None) -> PitchResult:
+               lead: np.ndarray | None = None, t_s=None, steps=None, record=None
+               ) -> PitchResult:
         """One window; ``lead`` (a file's window: its own padding before it, in place
         of the previous window's last ``pad`` samples, and ``next_speeds`` its padding
         after), ``t_s`` the padded samples' times and ``steps`` the window's intervals
         off the grid."""
         d = self.design
         u = padded_pitch_wheel_rate(self.s, self.prev_tail if lead is None else lead, speeds,
-                                    next_speeds, pad, t_s)
+                                    next_speeds, pad, t_s, record)
         r = pitch_filter(pitch_rad, u, self.s.sample_interval_s if steps is None else None,
                          d.params, d.noise, self.x, self.P, d.R, steps=steps)
         self.x, self.P = r.x_next, r.P_next

@@ -132,7 +132,8 @@ def test_without_truth_the_error_figures_are_null_and_plot_redraws(gap_run, tmp_
     assert s["truth"] is False and s["yaw_error_rms_deg"] is None and s["nees_mean"] is None
     assert s["nis_mean"]["roll"] > 0 and len(s["yaw_sigma_at_gap_end_deg"]) == 1
     assert {p.name for p in out.iterdir()} == {"scenario.yaml", "estimate.csv", "smoothed.csv",
-                                                "summary.json", "comparison.npz", "plots"}
+                                                "summary.json", "comparison.npz", "daily.csv",
+                                                "plots"}
     drawn = {p.name: p.stat().st_mtime_ns for p in (out / "plots").iterdir()}
     assert drawn
     rc, plotted, err = run_cli("plot", str(out))

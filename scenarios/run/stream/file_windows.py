@@ -44,7 +44,7 @@ def file_plan(s: Scenario, source, window_samples: int | None = None) -> Plan:
     stride = max(1, round(s.sample_interval_s * output_stride(s) / step))
     pad = int(round(s.estimator.wheel_torque_window_s / step)) // 2 + 2
     overlap = max(pad, int(round(SMOOTHER_OVERLAP_S / step)))
-    return Plan(n, bounds, stride, pad, overlap)
+    return Plan(n, bounds, stride, pad, overlap, (step, float(t[0])))
 
 
 def _day_starts(source, t0: float, t_last: float) -> list[int]:

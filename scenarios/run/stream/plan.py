@@ -41,6 +41,9 @@ class Plan:
     stride: int                 # output rows every ``stride`` samples
     pad: int                    # samples of each neighbour the wheel-torque fit needs
     overlap: int                # samples of the next window the smoother runs over
+    # A telemetry file off the scenario's grid: its median step and first time, which
+    # every window's wheel torque is resampled on (``bridge.inputs.prepared_inputs``).
+    record: tuple[float, float] | None = None
 
     def is_last(self, index: int) -> bool:
         return index == len(self.bounds) - 1

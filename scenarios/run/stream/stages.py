@@ -74,7 +74,8 @@ def filtered(s: Scenario, records):
         pad = len(cur.trail.t_s) if own else plan.pad
         t_pad = None if cur.steps is None else np.concatenate(
             [cur.lead.t_s, cur.t_s, cur.trail.t_s])
-        meas, u, extra = padded_filter_inputs(s, params, lead, cur.measured, trail, pad, t_pad)
+        meas, u, extra = padded_filter_inputs(s, params, lead, cur.measured, trail, pad, t_pad,
+                                              plan.record)
         w_disc = disc if cur.steps is None else StepTable(params, noise, cur.steps)
         result = paper_filter(design, meas, w_disc, *prior, u=u, extra=extra,
                               sun_head=cur.measured.sun_head)
@@ -88,7 +89,7 @@ def filtered(s: Scenario, records):
             r = pitch.window(cur.pitch_rad, speeds,
                              trail.speeds_radps if trail is not None else None, pad,
                              lead=cur.lead.measured.speeds_radps if own else None,
-                             t_s=t_pad, steps=cur.steps)
+                             t_s=t_pad, steps=cur.steps, record=plan.record)
             p = PitchHistory.of(r, cur.pitch_truth, nees_rows(cur.start, cur.stop) - cur.start)
         # The next window's derivative needs only the last samples of this one.
         prev_tail = cur.measured.cut(slice(-plan.pad, None))
