@@ -114,6 +114,48 @@ def _watched(args: list[str], what: str) -> tuple[float, float, float]:
     return wall, total, largest
 
 
+MONTH_S = 30 * DAY
+
+
+def month_run() -> Path:
+    """A 30-day `goes_next_equinox` run with its telemetry.csv (552 MB), written once
+    by `dynprop run` and reused: $BENCH_MONTH_DIR, else a folder in the system's
+    temporary directory that later bench runs find again."""
+    out = Path(os.environ.get("BENCH_MONTH_DIR")
+               or Path(tempfile.gettempdir()) / "dynprop-bench-month30")
+    if not (out / "telemetry.csv").is_file() or not (out / "summary.json").is_file():
+        _dynprop("run", "goes_next_equinox", "--duration-s", str(MONTH_S), "--set",
+                 "output.telemetry=true", "--out", str(out), "--force")
+    return out
+
+
+def estimate_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
+    """Issue 44: `dynprop estimate` on the 30-day run's telemetry.csv, with and
+    without its truth.csv: wall time and the peak memory of the whole process tree
+    (``_watched``: the summed PSS, and the largest RSS).  With a year's run made with
+    telemetry (``year``, else $BENCH_YEAR_DIR holding a telemetry.csv), the year too."""
+    month = month_run()
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        args = [DYNPROP, "estimate", str(month / "telemetry.csv"), "--scenario",
+                str(month / "scenario.yaml")]
+        wall, total, largest = _watched([*args, "--out", f"{tmp}/e"], "the 30-day estimate")
+        out += [("estimate_30day_s", wall, "s"),
+                ("estimate_30day_peak_rss_MB", max(total, largest), "MB")]
+        wall, total, largest = _watched([*args, "--truth", str(month / "truth.csv"), "--out",
+                                         f"{tmp}/t"], "the 30-day estimate with its truth")
+        out += [("estimate_truth_30day_s", wall, "s"),
+                ("estimate_truth_30day_peak_rss_MB", max(total, largest), "MB")]
+        year = _year_run(year)
+        if year is not None and (year / "telemetry.csv").is_file():
+            wall, total, largest = _watched(
+                [DYNPROP, "estimate", str(year / "telemetry.csv"), "--scenario",
+                 str(year / "scenario.yaml"), "--out", f"{tmp}/y"], "the year's estimate")
+            out += [("estimate_year_s", wall, "s"),
+                    ("estimate_year_peak_rss_MB", max(total, largest), "MB")]
+    return out
+
+
 def run_365day(out: Path | None = None) -> tuple[float, float, float, float]:
     """`dynprop run goes_next_equinox` over one year with the default output section:
     wall time, the peak of the summed memory of its processes and the largest single
@@ -365,7 +407,8 @@ def main() -> None:
         # `python benchmarks/run.py discretize_ms run_figures_2day_s`: just those.
         for name in only:
             name = {"export": "export_figures"}.get(name, name)   # `make bench BENCH=export`
-            if name in ("tune_figures", "batch_figures", "report_figures", "export_figures"):
+            if name in ("tune_figures", "batch_figures", "report_figures", "export_figures",
+                        "estimate_figures"):
                 for key, value, unit in globals()[name]():
                     report(key, value, unit)
                 continue
@@ -435,6 +478,8 @@ def main() -> None:
         for key, value, unit in report_figures(year):
             report(key, value, unit)
     for key, value, unit in export_figures(year):
+        report(key, value, unit)
+    for key, value, unit in estimate_figures():
         report(key, value, unit)
     year_dir.cleanup()
     # The plain-numpy loop, for comparison, scaled to a day: the tests' textbook

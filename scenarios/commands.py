@@ -52,6 +52,11 @@ def estimate_inputs_of(s: Scenario, telemetry: Path, truth: Path | None):
     return grid, truth_rows, sources
 
 
+def _is_aem(path) -> bool:
+    from .run.estimate import _is_aem as is_aem
+    return is_aem(path)
+
+
 WINDOW_SAMPLES_ENV = "DYNPROP_WINDOW_SAMPLES"   # a test hook: small windows in a subprocess
 
 
@@ -61,11 +66,13 @@ def estimate_into(s: Scenario, telemetry: Path, truth: Path | None, stage: Path,
     telemetry streams through the run's engine (``run.stream.file_run``), read by
     range from a scratch copy in the stage (``files.telemetry_source``), so a file of
     any length fits in memory; every problem with the file is reported before the
-    engine starts.  With one, the record is held whole (``run.estimate``)."""
+    engine starts; a truth.csv streams alongside (``file_windows.FileTruth``).  With
+    an attitude history (CCSDS AEM) the record is held whole (``run.estimate``)."""
     import os
     sources = {"file": str(Path(telemetry).resolve()),
                "truth_file": None if truth is None else str(Path(truth).resolve())}
-    if truth is not None:
+    if truth is not None and _is_aem(truth):
+        # An attitude history (attitude alone): held whole (``run.estimate``).
         from .run.estimate import estimate_inputs, estimate_to_directory
         grid, truth_rows = estimate_inputs(s, telemetry, truth)
         return estimate_to_directory(s, grid, truth_rows, stage, sources)
@@ -75,6 +82,6 @@ def estimate_into(s: Scenario, telemetry: Path, truth: Path | None, stage: Path,
         window_samples = int(os.environ[WINDOW_SAMPLES_ENV])
     source = open_source(telemetry, s, Path(stage) / ".telemetry")
     try:
-        return estimate_stream(s, source, stage, sources, window_samples)
+        return estimate_stream(s, source, stage, sources, window_samples, truth_path=truth)
     finally:
         source.close()

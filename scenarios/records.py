@@ -77,7 +77,7 @@ class TruthWindow:
     before and after it that its inputs are derived over, reaching back and on to a
     sample with every wheel read, so a dropout across the window's edge is bridged as
     in the whole file; off the scenario's grid ``steps`` holds the interval after
-    each sample."""
+    each sample.  With a truth file, its states (``truth_rows`` where it has rows)."""
 
     index: int
     start: int
@@ -93,6 +93,9 @@ class TruthWindow:
     steps: np.ndarray | None = field(default=None, kw_only=True)
     lead: Padding | None = field(default=None, kw_only=True)
     trail: Padding | None = field(default=None, kw_only=True)
+    # A truth file with rows at only some samples: those (local indices), where the
+    # truth arrays are finite (NaN elsewhere); None when every sample has one.
+    truth_rows: np.ndarray | None = field(default=None, kw_only=True)
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,7 @@ class Window(TruthWindow):
     linear: FilterHistory | None
     nees_linear: np.ndarray | None
     smoothed_sigma: np.ndarray | None = field(default=None, kw_only=True)
+    pitch_rows: object = field(default=None, kw_only=True)   # at a sparse truth's rows
 
     @classmethod
     def join(cls, truth: TruthWindow, twin: TwinWindow | None, **estimates) -> Window:

@@ -39,17 +39,20 @@ def ekf_design(s: Scenario) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
 
 
 def ekf_inputs(s: Scenario, params: em.ModelParams, roll, pitch, yaw, speeds,
-               yaw_sigma=None, sun_head=None, known_Nm=None, t_s=None) -> EkfInputs:
+               yaw_sigma=None, sun_head=None, known_Nm=None, t_s=None, record=None
+               ) -> EkfInputs:
     """Telemetry arrays (SI) to the EKF's measurements and inputs (``t_s``: the
-    samples' own times, for telemetry off the grid)."""
+    samples' own times, for telemetry off the grid; ``record`` their file's cadence
+    and first time, ``inputs.prepared_inputs``')."""
     meas, u, _ = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm,
-                               t_s)
+                               t_s, record)
     H = params.H_Nms
     Nx, Nz, Nw = em.input_torques(params, u)
     Hm = yaw_momentum(speeds, build.build_spacecraft(s).momentum_factors(1))
     Hm = np.where(np.isfinite(Hm), Hm, H)
     Hdot = (wheel_torque(Hm, s.sample_interval_s, s.estimator.wheel_torque_window_s)
-            if t_s is None else wheel_torque_at(t_s, Hm, s.estimator.wheel_torque_window_s))
+            if t_s is None else wheel_torque_at(t_s, Hm, s.estimator.wheel_torque_window_s,
+                                                *(record if record is not None else ())))
     z = np.column_stack([meas.roll_rad, pitch, meas.yaw_rad, meas.h_Nms])
     r = meas.r()
     r = np.column_stack([r[:, 0], r[:, 0], r[:, 1], r[:, 2]])
@@ -57,11 +60,12 @@ def ekf_inputs(s: Scenario, params: em.ModelParams, roll, pitch, yaw, speeds,
 
 
 def padded_ekf_inputs(s: Scenario, params: em.ModelParams, prev_tail: tuple | None,
-                      cur: tuple, nxt: tuple | None, pad: int) -> EkfInputs:
+                      cur: tuple, nxt: tuple | None, pad: int, t_s=None, record=None
+                      ) -> EkfInputs:
     """``ekf_inputs`` of a window from its telemetry (``records.Measured`` plus the
     pitch, as one tuple) padded with ``pad`` samples of each neighbour
     (``inputs.join_padded``), so the derivatives N_w* and Ḣ equal the whole run's."""
     joined, sl = join_padded(prev_tail, cur, nxt, pad)
     roll, yaw, speeds, sigma, head, pitch = joined
-    full = ekf_inputs(s, params, roll, pitch, yaw, speeds, sigma, head)
+    full = ekf_inputs(s, params, roll, pitch, yaw, speeds, sigma, head, t_s=t_s, record=record)
     return EkfInputs(full.z[sl], full.r[sl], full.u[sl])

@@ -39,8 +39,11 @@ def _pitch_at(w: Window, k, pick) -> PitchRows | None:
     p = w.pitch
     if p is None:
         return None
+    # A sparse truth's pitch (NaN between its rows) has its errors here, its NEES in
+    # the summary only (``run.pitch.history_at``).
+    truth = w.pitch_truth is not None and (p.nees is not None or w.truth_rows is not None)
     return PitchRows(p.x[k], p.sigma[k], p.innovations[k], p.innovation_var[k],
-                     None if p.nees is None else w.pitch_truth[k],
+                     w.pitch_truth[k] if truth else None,
                      None if p.nees is None else p.nees[pick])
 
 
@@ -132,8 +135,9 @@ class ComparisonRows:
         if truth:
             series["nees_real"] = (nees_idx, w.nees_real, None)
         p = w.pitch
-        if p is not None and p.nees is not None:
+        if p is not None and truth and (p.nees is not None or w.truth_rows is not None):
             series["err_pitch"] = (samples, p.x - w.pitch_truth, PITCH_FACTORS)
+        if p is not None and p.nees is not None:
             series["nees_pitch"] = (nees_idx, p.nees, None)
         for key, (idx, v, scale) in series.items():
             if len(idx) == 0:

@@ -97,7 +97,18 @@ def read_truth(path: Path, s: Scenario, t_grid: np.ndarray, on_grid: bool = True
     telemetry off the grid (``on_grid`` False: samples at their own times) the truth
     interpolated to those times (``_interpolated``)."""
     path = Path(path)
-    cols = read_input_csv(path, "truth")
+    return truth_at(path, s, truth_columns(path), t_grid, on_grid)
+
+
+def truth_columns(path: Path) -> dict[str, np.ndarray]:
+    """A truth.csv's columns as read (``read_truth`` reads them once and places them
+    on a grid with ``truth_at``; a streamed estimate does so window by window)."""
+    return read_input_csv(Path(path), "truth")
+
+
+def truth_at(path: Path, s: Scenario, cols: dict, t_grid: np.ndarray, on_grid: bool = True
+             ) -> TruthFromFile:
+    """``read_truth`` of the columns ``cols`` of the file ``path``."""
     # The optional sources have columns only in runs that flew them: read when the file
     # has any of their columns, and required when the scenario flies them.
     flown = {"disturbance"} if build.build_disturbance(s).enabled else set()

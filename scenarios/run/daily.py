@@ -49,8 +49,11 @@ class DailyTally:
         self.sums[key] += np.bincount(day[ok], np.asarray(values)[ok], self.n_days)
         self.counts[key] += np.bincount(day[ok], minlength=self.n_days)
 
-    def add(self, w: Window, err, err_lin, nees_idx, gaps_closed, gap_hours=None) -> None:
-        """``gap_hours``: off the grid, each closed gap's (start, end) in hours."""
+    def add(self, w: Window, err, err_lin, nees_idx, gaps_closed, gap_hours=None,
+            end_errors: dict | None = None) -> None:
+        """``gap_hours``: off the grid, each closed gap's (start, end) in hours;
+        ``end_errors``: a sparse truth's yaw error judged at each gap end (deg, by end
+        sample; None where not tested)."""
         a = w.start
         n = len(w.t_s)
         day = self._day(np.arange(a, a + n), w.t_s)
@@ -76,6 +79,8 @@ class DailyTally:
             start, end = (ga, gb) if gap_hours is None else gap_hours[i]
             if np.isnan(self.gap[d, 0]) or end - start > self.gap[d, 1] - self.gap[d, 0]:
                 e = np.nan if err is None else err[gb - a, Y] * RAD2DEG
+                if end_errors is not None:
+                    e = np.nan if end_errors.get(gb) is None else end_errors[gb]
                 self.gap[d] = (start, end, e, sig[gb - a, Y] * RAD2DEG)
 
     def columns(self) -> dict[str, np.ndarray]:

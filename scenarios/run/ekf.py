@@ -4,6 +4,7 @@ design and inputs are ``bridge.ekf``'s."""
 
 from __future__ import annotations
 
+import numpy as np
 from dynprop.estimator.ekf.filter import EkfResult, ekf_filter
 from dynprop.estimator.linear import model as em
 from dynprop.estimator.linear.steps import step_intervals
@@ -28,6 +29,13 @@ def run_ekf(s: Scenario, roll, pitch, yaw, speeds, yaw_sigma=None, sun_head=None
                       dt_s=None if t_s is None else step_intervals(t_s))
 
 
+def check_ekf_columns(s: Scenario, names) -> None:
+    """The EKF beside the paper's filter needs the Earth sensor's pitch."""
+    if "ekf" in s.estimator.filters and "pitch_deg" not in names:
+        raise RunDirError("estimator.filters: the EKF measures pitch, and the telemetry has "
+                          "no pitch_deg column; remove ekf or add the Earth sensor's pitch")
+
+
 def other_filters(s: Scenario, columns: dict, rows=None, on_grid: bool = True
                   ) -> dict[str, EkfResult]:
     """The filters besides the paper's (``estimator.filters``) on telemetry.csv's
@@ -35,9 +43,7 @@ def other_filters(s: Scenario, columns: dict, rows=None, on_grid: bool = True
     False: the samples at their own times ``columns['t_s']``."""
     if "ekf" not in s.estimator.filters:
         return {}
-    if "pitch_deg" not in columns:
-        raise RunDirError("estimator.filters: the EKF measures pitch, and the telemetry has "
-                          "no pitch_deg column; remove ekf or add the Earth sensor's pitch")
+    check_ekf_columns(s, columns)
     roll, yaw, speeds, sigma, head = telemetry_inputs(s, columns)
     return {"ekf": run_ekf(s, roll, columns["pitch_deg"] * DEG, yaw, speeds, sigma, head,
                            rows=rows, t_s=None if on_grid else columns["t_s"])}
@@ -57,14 +63,20 @@ class EkfStream:
     def _telemetry(w: TruthWindow) -> tuple:
         return (*w.measured, w.pitch_rad)
 
-    def window(self, cur: TruthWindow, nxt: TruthWindow | None, pad: int) -> EkfResult:
+    def window(self, cur: TruthWindow, nxt: TruthWindow | None, pad: int, record=None
+               ) -> EkfResult:
+        """One window (``record``: off the grid, the file's cadence and first time)."""
         prev, after = self.prev_tail, None if nxt is None else self._telemetry(nxt)
+        t_pad = None
         if cur.lead is not None:
             # A telemetry file's window, with its own padding (``records.TruthWindow``).
             prev = (*cur.lead.measured, cur.lead.pitch_rad)
             after, pad = (*cur.trail.measured, cur.trail.pitch_rad), len(cur.trail.t_s)
-        inputs = padded_ekf_inputs(self.s, self.params, prev, self._telemetry(cur), after, pad)
-        r = ekf_filter(inputs, self.pm, self.wn, self.X, self.P)
+            if cur.steps is not None:
+                t_pad = np.concatenate([cur.lead.t_s, cur.t_s, cur.trail.t_s])
+        inputs = padded_ekf_inputs(self.s, self.params, prev, self._telemetry(cur), after, pad,
+                                   t_pad, record)
+        r = ekf_filter(inputs, self.pm, self.wn, self.X, self.P, dt_s=cur.steps)
         self.X, self.P = r.x_next, r.P_next
         self.prev_tail = tuple(None if v is None else v[-pad:] for v in self._telemetry(cur))
         return r

@@ -94,13 +94,16 @@ class PitchHistory:
                    r.backend, values)
 
 
-def history_at(r: PitchResult, rows: np.ndarray, truth: np.ndarray | None) -> PitchHistory:
+def history_at(r: PitchResult, rows: np.ndarray, truth: np.ndarray | None, first: int = 0
+               ) -> PitchHistory:
     """The pitch filter at the samples ``rows`` only, with ``truth`` there (or None):
-    its NEES on every ``samples.NEES_STRIDE``-th of those rows, as ``run`` forms it."""
+    its NEES on every ``samples.NEES_STRIDE``-th of those rows, as ``run`` forms it
+    (``first``: how many rows came before, in a streamed file's earlier windows)."""
     sub = PitchResult(r.x[rows], r.P_packed[rows], r.innovations[rows],
                       r.innovation_var[rows], r.nis[rows], r.x_next, r.P_next, r.rows[:0],
                       r.u[:0], r.backend)
-    return PitchHistory.of(sub, truth, nees_rows(0, len(rows)), keep_P=True)
+    return PitchHistory.of(sub, truth, nees_rows(first, first + len(rows)) - first,
+                           keep_P=True)
 
 
 def steady_sigma_deg(s: Scenario) -> float | None:

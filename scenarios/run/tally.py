@@ -155,6 +155,13 @@ class RunTally:
         self.nis = {k: [Mean() for _ in range(3)] for k in ("real", "linear")}
         self.ends = {"err": [], "err_linear": [], "sigma": []}
         self.within = True
+        self.judged = 0                 # gap ends whose error was judged
+        # A truth file's rows at only some samples: where each gap end was judged (its
+        # time, or None), the errors judged in the latest window (by gap end) and the
+        # last common row seen (global sample, yaw error, yaw σ, time).
+        self.compared_at: list[float | None] = []
+        self.end_errors: dict[int, float | None] = {}
+        self.last_row: tuple[int, float, float, float] | None = None
         self.truth_max = {"roll": (0.0, 0.0), "yaw": (0.0, 0.0)}
         self.backend = None
         self.bounds = chi2_bounds(N_STATES, 1)
@@ -168,12 +175,17 @@ class RunTally:
         nees_real, nees_lin = w.nees_real, w.nees_linear
         present = np.isfinite(w.measured.yaw_rad)
         closed = self.gaps.add(a, present, w.t_s)
-        for _, b in closed:
+        self.end_errors = {}
+        for ga, b in closed:
             k = b - a
             self.ends["sigma"].append(float(sig[k, Y] * RAD2DEG))
-            if self.truth:
+            if self.truth and w.truth_rows is not None:
+                self._judge_at_row(w, err, ga, b)
+            elif self.truth:
                 self.ends["err"].append(float(err[k, Y] * RAD2DEG))
                 self.within &= bool(abs(err[k, Y]) <= 3 * sig[k, Y])
+                self.judged += 1
+                self.compared_at.append(float(w.t_s[k]))
             if self.twin:
                 self.ends["err_linear"].append(float(err_lin[k, Y] * RAD2DEG))
         for name in ("real", "linear"):
@@ -192,7 +204,8 @@ class RunTally:
             self.per_state_n += len(ratio)
             self._nees("real", nees_real)
             self.nees_settled.add(nees_real[self._settled(w, nees_idx)])
-            top = truth_extremes(w.truth_model, w.t_s)
+            rows = slice(None) if w.truth_rows is None else w.truth_rows
+            top = truth_extremes(w.truth_model[rows], w.t_s[rows])
             self.truth_max = {k: max(self.truth_max[k], top[k], key=lambda v: v[0])
                               for k in top}
             if w.smoothed_x is not None:
@@ -209,6 +222,35 @@ class RunTally:
                     diff.add(d)
                     self.max_diff[name] = max(self.max_diff[name], float(np.max(np.abs(d))))
         return closed
+
+    def _judge_at_row(self, w: Window, err, gap_start: int, b: int) -> None:
+        """A gap end judged at the last common row at or before it, when that row is
+        inside the gap and the yaw σ there is the end's (``run.estimate_truth``'s rule,
+        the last row carried across windows)."""
+        from ..run.estimate_truth import END_SIGMA_MATCH
+        a, sig = w.start, w.real.sigma
+        rows = w.truth_rows
+        i = int(np.searchsorted(rows, b - a, side="right")) - 1
+        if i >= 0:
+            r = int(rows[i])
+            row = (a + r, err[r, Y], sig[r, Y], w.t_s[r])
+        else:
+            row = self.last_row
+        ok = row is not None and row[0] >= gap_start and \
+            abs(row[2] / sig[b - a, Y] - 1.0) <= END_SIGMA_MATCH
+        e = float(row[1] * RAD2DEG) if ok else None
+        self.ends["err"].append(e)
+        self.end_errors[b] = e
+        self.compared_at.append(float(row[3]) if ok else None)
+        if ok:
+            self.judged += 1
+            self.within &= bool(abs(row[1]) <= 3 * row[2])
+
+    def end_window(self, w: Window, err) -> None:
+        """Carries a sparse truth's last common row of the window to the next."""
+        if self.truth and w.truth_rows is not None and len(w.truth_rows):
+            r = int(w.truth_rows[-1])
+            self.last_row = (w.start + r, err[r, Y], w.real.sigma[r, Y], w.t_s[r])
 
     def _settled(self, w: Window, idx) -> np.ndarray:
         """Which of the samples ``idx`` are past the start-up (by time off the grid)."""
@@ -254,7 +296,7 @@ class RunTally:
                                   lambda: self.rms["yaw_smoothed"].value() * RAD2DEG),
             end_err=when(truth, lambda: self.ends["err"]),
             end_err_linear=when(twin, lambda: self.ends["err_linear"]),
-            ends_within=when(truth and bool(self.ends["err"]), lambda: self.within),
+            ends_within=when(truth and self.judged > 0, lambda: self.within),
             comparison=when(truth and twin, comparison),
             nees_mean=when(truth, lambda: float(self.nees["real"].total
                                                 / self.nees["real"].count)),

@@ -56,15 +56,19 @@ class Engine:
         self.extra = {name: (FilterTally(name), CsvAppender(self.stage / f"estimate_{name}.csv"))
                       for name in s.estimator.filters if name != "paper"}
         self.last_bias, self.rejected = None, np.zeros(6, dtype=np.int64)
+        self.rows_before = 0    # a sparse truth's rows in the windows before
 
     def add(self, w: Window) -> None:
         err = None if w.truth_model is None else w.real.x - w.truth_model
         err_lin = None if w.linear is None else w.linear.x - w.twin_model
-        nees_idx = nees_rows(w.start, w.stop)
+        sparse = w.truth_rows is not None
+        nees_idx = w.start + w.truth_rows if sparse else nees_rows(w.start, w.stop)
         closed = self.tally.add(w, err, err_lin, nees_idx)
+        self.tally.end_window(w, err)
         hours = self.tally.gaps.hours[len(self.tally.gaps.hours) - len(closed):] \
             if self.timed else None
-        self.daily.add(w, err, err_lin, nees_idx, closed, hours)
+        self.daily.add(w, err, err_lin, nees_idx, closed, hours,
+                       self.tally.end_errors if sparse else None)
         self.comparison.add(w, nees_idx, err, err_lin)
         k = output_rows(w.start, w.stop, self.plan.stride) - w.start
         wn = self.params.omega_n_radps
@@ -77,14 +81,21 @@ class Engine:
             self.smoothed.append(estimate_columns(w.t_s[k], w.smoothed_x[k],
                                                   w.smoothed_sigma[k], wn))
         t_rel = w.t_s - self.t0
-        if p is not None:
+        if p is not None and not sparse:
             self.pitch.add(p, w.start, t_rel, w.pitch_truth)
+        elif p is not None:
+            self.pitch.add_own(p, t_rel)
+            r = w.truth_rows
+            self.pitch.add_errors(w.pitch_rows, self.rows_before, t_rel[r], w.pitch_truth[r])
+            self.rows_before += len(r)
         if bias:
             self.last_bias = {name: v[-1] for name, v in bias.items()}
         if w.real.rejected is not None:
             self.rejected = self.rejected + count_rejected(w.real.rejected, w.measured.sun_head)
         for name, (figs, file) in self.extra.items():
-            figs.add(w.filters[name], w.start, w.truth_model, closed, t_rel)
+            # A sparse truth's errors are the paper filter's alone.
+            figs.add(w.filters[name], w.start, None if sparse else w.truth_model, closed,
+                     t_rel)
             file.append(estimate_columns(w.t_s[k], w.filters[name].x[k],
                                          w.filters[name].sigma[k], wn))
 

@@ -32,7 +32,7 @@ from ..filtering import (
     smoothed_full_P,
     smoothed_full_x,
 )
-from ..pitch import PitchHistory, PitchStream
+from ..pitch import PitchHistory, PitchStream, history_at
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,7 @@ class Filtered:
     ekf: EkfResult | None
     pitch: PitchHistory | None
     disc: object                # the window's Φ, Γ, Q_d (one step, or a StepTable)
+    pitch_rows: PitchHistory | None = None   # at a sparse truth's rows
 
 
 def filtered(s: Scenario, records):
@@ -62,7 +63,9 @@ def filtered(s: Scenario, records):
     ekf = EkfStream(s, params) if "ekf" in s.estimator.filters else None
     pitch = PitchStream(s)
     prev_tail, cur = None, next(records, None)
+    rows_before = 0     # a sparse truth's rows in the windows before
     while cur is not None:
+        p_rows = None
         # The last window needs no look-ahead (and waiting for the stream's end would
         # hold it up until the producer is done with its files).
         nxt = None if plan.is_last(cur.index) else next(records, None)
@@ -80,7 +83,7 @@ def filtered(s: Scenario, records):
         result = paper_filter(design, meas, w_disc, *prior, u=u, extra=extra,
                               sun_head=cur.measured.sun_head)
         prior = (result.x_next, result.P_next)
-        e = None if ekf is None else ekf.window(cur, nxt, plan.pad)
+        e = None if ekf is None else ekf.window(cur, nxt, plan.pad, plan.record)
         # Reduced at once to what the files and tallies read (its covariance history
         # is not kept): the NEES on the NEES samples against the window's truth.
         p = None
@@ -90,10 +93,20 @@ def filtered(s: Scenario, records):
                              trail.speeds_radps if trail is not None else None, pad,
                              lead=cur.lead.measured.speeds_radps if own else None,
                              t_s=t_pad, steps=cur.steps, record=plan.record)
-            p = PitchHistory.of(r, cur.pitch_truth, nees_rows(cur.start, cur.stop) - cur.start)
+            if cur.truth_rows is None:
+                p = PitchHistory.of(r, cur.pitch_truth, nees_local(cur))
+            else:
+                # A truth at some samples only: the filter's own history (no NEES), and
+                # at the truth's rows, its NEES on every NEES_STRIDE-th row counted
+                # from the file's first (``run.pitch.history_at``'s rows).
+                m = len(cur.truth_rows)
+                p = PitchHistory.of(r, None, [])
+                p_rows = history_at(r, cur.truth_rows, cur.pitch_truth[cur.truth_rows],
+                                    first=rows_before)
+                rows_before += m
         # The next window's derivative needs only the last samples of this one.
         prev_tail = cur.measured.cut(slice(-plan.pad, None))
-        yield Filtered(cur, result, u, extra, e, p, w_disc)
+        yield Filtered(cur, result, u, extra, e, p, w_disc, p_rows)
         cur = nxt
 
 
@@ -111,12 +124,21 @@ class Smoothed:
     filters: dict[str, FilterHistory]
     pitch: PitchHistory | None
     smoothed_sigma: np.ndarray | None = None
+    pitch_rows: PitchHistory | None = None
+
+
+def nees_local(w: TruthWindow) -> np.ndarray:
+    """The window's samples (local) its NEES is formed on: every ``NEES_STRIDE``-th,
+    or, with a truth file's rows at only some samples, each of those."""
+    if w.truth_rows is not None:
+        return w.truth_rows
+    return nees_rows(w.start, w.start + len(w.t_s)) - w.start
 
 
 def _lighten(f: Filtered, smoothed_x: np.ndarray | None,
              smoothed_sigma: np.ndarray | None = None) -> Smoothed:
     w, real = f.window, f.real
-    k = nees_rows(w.start, w.start + len(w.t_s)) - w.start
+    k = nees_local(w)
     filters = {}
     if f.ekf is not None:
         e = f.ekf
@@ -127,7 +149,7 @@ def _lighten(f: Filtered, smoothed_x: np.ndarray | None,
                                      getattr(real, "rejected", None)),
                     None if w.truth_model is None else
                     nees(real.x[k], unpack(real.P_packed[k]), w.truth_model[k]), smoothed_x,
-                    filters, f.pitch, smoothed_sigma)
+                    filters, f.pitch, smoothed_sigma, f.pitch_rows)
 
 
 def smoothed(s: Scenario, records, smooth: bool = True, covariance: bool = False):
