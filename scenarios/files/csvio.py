@@ -236,7 +236,7 @@ def read_csv_blocks(path: Path | str, text=TEXT_COLUMNS, only=None, block_rows: 
         first = 2              # the file's row of the block's first line (the header is 1)
         while lines := list(itertools.islice(fh, block_rows)):
             body = "".join(lines)
-            if body.strip():
+            if not body.isspace():     # (strip would copy the block)
                 try:
                     yield _parse_body(body, names, [n for n in wanted if n in text],
                                       [n for n in wanted if n not in text])
