@@ -114,27 +114,12 @@ def _watched(args: list[str], what: str) -> tuple[float, float, float]:
     return wall, total, largest
 
 
-MONTH_S = 30 * DAY
-
-
-def month_run() -> Path:
-    """A 30-day `goes_next_equinox` run with its telemetry.csv (552 MB), written once
-    by `dynprop run` and reused: $BENCH_MONTH_DIR, else a folder in the system's
-    temporary directory that later bench runs find again."""
-    out = Path(os.environ.get("BENCH_MONTH_DIR")
-               or Path(tempfile.gettempdir()) / "dynprop-bench-month30")
-    if not (out / "telemetry.csv").is_file() or not (out / "summary.json").is_file():
-        _dynprop("run", "goes_next_equinox", "--duration-s", str(MONTH_S), "--set",
-                 "output.telemetry=true", "--out", str(out), "--force")
-    return out
-
-
 def estimate_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
     """Issue 44: `dynprop estimate` on the 30-day run's telemetry.csv, with and
     without its truth.csv: wall time and the peak memory of the whole process tree
     (``_watched``: the summed PSS, and the largest RSS).  With a year's run made with
     telemetry (``year``, else $BENCH_YEAR_DIR holding a telemetry.csv), the year too."""
-    month = month_run()
+    month = _thirty_day_run()
     out = []
     with tempfile.TemporaryDirectory() as tmp:
         args = [DYNPROP, "estimate", str(month / "telemetry.csv"), "--scenario",
@@ -214,6 +199,38 @@ def export_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
                                     "the year's export")
             out += [("export_year_s", wall, "s"), ("export_year_peak_rss_MB", rss, "MB")]
     return out
+
+
+BENCH_CACHE = Path(os.environ.get("BENCH_CACHE_DIR") or Path(__file__).resolve().parent / ".cache")
+
+
+def _thirty_day_run() -> Path:
+    """Issue 44's 30-day run with its telemetry.csv (552 MB), written once into the
+    bench cache (benchmarks/.cache, or $BENCH_CACHE_DIR) by the streamed `run` (20 s)
+    and reused; one without its summary.json (a killed run) is written again."""
+    run = BENCH_CACHE / "run30"
+    if not (run / "summary.json").is_file():
+        _dynprop("run", "goes_next_equinox", "--duration-s", str(30 * DAY), "--set",
+                 "output.telemetry=true", "--out", run, "--force")
+    return run
+
+
+def page_30day_figures() -> list[tuple[str, float, str]]:
+    """Issue 44: peak memory of the whole process tree (``_watched``; target ≤ 1 GB)
+    of `dynprop report` and of `dynprop export` (the largest over its formats, AEM and
+    APM, of the estimate and of the truth) on the cached 30-day run."""
+    run = _thirty_day_run()
+    _, report_mb, _ = _watched([DYNPROP, "report", str(run)], "the 30-day report")
+    export_mb = 0.0
+    with tempfile.TemporaryDirectory() as tmp:
+        for what in ("estimate", "truth"):
+            for fmt, extra in (("aem", []), ("apm", ["--at", str(15 * DAY)])):
+                _, mb, _ = _watched([DYNPROP, "export", str(run), "--format", fmt, "--what",
+                                     what, *extra, "--out", f"{tmp}/x.{fmt}", "--force"],
+                                    f"the 30-day {what} {fmt} export")
+                export_mb = max(export_mb, mb)
+    return [("report_30day_peak_rss_MB", report_mb, "MB"),
+            ("export_30day_peak_rss_MB", export_mb, "MB")]
 
 
 def _exported(run: Path) -> str:
@@ -408,7 +425,7 @@ def main() -> None:
         for name in only:
             name = {"export": "export_figures"}.get(name, name)   # `make bench BENCH=export`
             if name in ("tune_figures", "batch_figures", "report_figures", "export_figures",
-                        "estimate_figures"):
+                        "estimate_figures", "page_30day_figures"):
                 for key, value, unit in globals()[name]():
                     report(key, value, unit)
                 continue
@@ -482,6 +499,8 @@ def main() -> None:
     for key, value, unit in estimate_figures():
         report(key, value, unit)
     year_dir.cleanup()
+    for key, value, unit in page_30day_figures():
+        report(key, value, unit)
     # The plain-numpy loop, for comparison, scaled to a day: the tests' textbook
     # reference (tests/estimator/dense_reference.py), one Python iteration per step.
     from tests.estimator.dense_reference import kalman_reference

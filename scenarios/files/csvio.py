@@ -28,6 +28,7 @@ text columns (``TEXT_COLUMNS``: ``time_utc``), which it returns as strings.
 from __future__ import annotations
 
 import io
+import itertools
 import os
 from contextlib import nullcontext
 from multiprocessing import get_context
@@ -216,6 +217,35 @@ def read_csv(path: Path | str, text=TEXT_COLUMNS, only=None) -> dict[str, np.nda
         raise ValueError(f"{path}: {_first_bad_row(body, names, wanted, text)}") from None
 
 
+def read_csv_blocks(path: Path | str, text=TEXT_COLUMNS, only=None, block_rows: int = 100_000):
+    """``read_csv``'s columns ``block_rows`` lines at a time, for a file too long to
+    hold (a month's truth.csv is 2 GB of text): each block is parsed by the same
+    parser as the whole read, so the blocks joined are ``read_csv``'s values bit for
+    bit, and a bad row raises its message, row for row.  A file of no rows gives no
+    block."""
+    with open(path) as fh:
+        header = fh.readline()
+        while header.startswith("#"):
+            header = fh.readline()
+        if not header.strip():
+            raise ValueError(f"{path}: row 1 is empty; it must be the header of column names"
+                             if any(line.strip() for line in fh)
+                             else f"{path}: the file is empty (no header)")
+        names = header.strip().split(",")
+        wanted = [n for n in names if only is None or n in only]
+        first = 2              # the file's row of the block's first line (the header is 1)
+        while lines := list(itertools.islice(fh, block_rows)):
+            body = "".join(lines)
+            if not body.isspace():     # (strip would copy the block)
+                try:
+                    yield _parse_body(body, names, [n for n in wanted if n in text],
+                                      [n for n in wanted if n not in text])
+                except ValueError:
+                    why = _first_bad_row(body, names, wanted, text, first)
+                    raise ValueError(f"{path}: {why}") from None
+            first += len(lines)
+
+
 def _has_non_number_text(path: Path | str, block: int = 1 << 24) -> bool:
     """Whether the rows after the header hold ``nan`` or ``inf`` in any case, read a
     block at a time (a season's file is not held whole for this)."""
@@ -280,9 +310,9 @@ def comments(path: Path | str) -> dict[str, str]:
     return found
 
 
-def _first_bad_row(body: str, names: list[str], wanted=None, text=()) -> str:
+def _first_bad_row(body: str, names: list[str], wanted=None, text=(), first: int = 2) -> str:
     numbers = [n for n in (names if wanted is None else wanted) if n not in text]
-    for k, line in enumerate(body.splitlines(), start=2):
+    for k, line in enumerate(body.splitlines(), start=first):
         if not line.strip():
             continue
         fields = line.split(",")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import base64
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -117,6 +118,29 @@ def robust_range(values: list, x, skip_s: float, scale: float, pad: float = 1.12
     return None if not (top > 0 and np.isfinite(top)) else (-pad * top, pad * top)
 
 
+@dataclass(frozen=True)
+class Reduced:
+    """A series as the page draws it: its rows (``step`` 0: ``x``, ``y`` and the
+    full-rate extremes ``lo``, ``hi`` or None), or each bin's first x and its
+    smallest and largest value (``step``: the rows of a bin, for the label)."""
+    x: np.ndarray
+    y: np.ndarray | None
+    lo: np.ndarray | None
+    hi: np.ndarray | None
+    step: int = 0
+
+
+def reduced(x, y, low=None, high=None) -> Reduced:
+    """``y`` over ``x`` reduced for drawing (``bin_starts``, ``extremes``)."""
+    x = np.asarray(x, dtype=float)
+    starts = bin_starts(len(x), x=x)
+    if starts is None:
+        return Reduced(x, y, low, high)
+    lo, hi = extremes(y, starts, low, high)
+    return Reduced(x[starts], None, lo, hi, int(starts[1] - starts[0]) if len(starts) > 1
+                   else 1)
+
+
 def series(x, y, name: str, color: str, yaxis: str = "y", low=None, high=None,
            group: str | None = None, show: bool = True, mode: str = "lines",
            outline: bool = False) -> list[dict]:
@@ -125,21 +149,24 @@ def series(x, y, name: str, color: str, yaxis: str = "y", low=None, high=None,
     behind them; beyond ``MAX_POINTS`` rows only the band of each bin's extremes
     (``outline``: its two edges as thin lines, for a series drawn over another's
     band, where two fills would blend into a third colour)."""
-    x = np.asarray(x, dtype=float)
-    starts = bin_starts(len(x), x=x)
-    if starts is None:
+    return draw(reduced(x, y, low, high), name, color, yaxis, group, show, mode, outline)
+
+
+def draw(r: Reduced, name: str, color: str, yaxis: str = "y", group: str | None = None,
+         show: bool = True, mode: str = "lines", outline: bool = False) -> list[dict]:
+    """``series``'s traces of a series already reduced."""
+    if not r.step:
         out = []
-        if low is not None and high is not None:
-            out += band(x, low, high, f"{name} (full-rate extremes)", color, yaxis, 0.18,
+        if r.lo is not None and r.hi is not None:
+            out += band(r.x, r.lo, r.hi, f"{name} (full-rate extremes)", color, yaxis, 0.18,
                         group=group, show=False)
-        return out + [line(x, y, name, color, yaxis, group=group, show=show, mode=mode)]
-    lo, hi = extremes(y, starts, low, high)
-    label = f"{name} (min–max per {_bin_label(x, starts)})"
+        return out + [line(r.x, r.y, name, color, yaxis, group=group, show=show, mode=mode)]
+    label = f"{name} (min–max per {r.step} rows)"
     if outline:
-        xs = x[starts]
-        return [line(np.concatenate([xs, [np.nan], xs]), np.concatenate([lo, [np.nan], hi]),
-                     label, color, yaxis, width=0.8, group=group, show=show)]
-    return band(x[starts], lo, hi, label, color, yaxis, 0.55, group=group, show=show)
+        return [line(np.concatenate([r.x, [np.nan], r.x]),
+                     np.concatenate([r.lo, [np.nan], r.hi]), label, color, yaxis, width=0.8,
+                     group=group, show=show)]
+    return band(r.x, r.lo, r.hi, label, color, yaxis, 0.55, group=group, show=show)
 
 
 def sigma_band(x, sigma, yaxis: str, name: str = "±3σ (filter)", color: str = COLORS["sigma"],
