@@ -110,3 +110,37 @@ def test_small_windows_off_the_grid_step_across_each_boundary(gap_run, jittered,
         # step across a boundary taken wrong (the window's own last step repeated over
         # the 30 min hole) moves it by 3e-3 σ.
         assert dev < 1e-4, (key, dev)
+
+
+def _late_defect(gap_run, tmp_path, row: int, column: str, value: str):
+    """gap_run's telemetry.csv with one cell of a data row near the end replaced."""
+    lines = (gap_run / "telemetry.csv").read_text().splitlines(keepends=True)
+    head = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    names = lines[head].rstrip("\n").split(",")
+    cells = lines[head + 1 + row].rstrip("\n").split(",")
+    cells[names.index(column)] = value
+    lines[head + 1 + row] = ",".join(cells) + "\n"
+    path = tmp_path / "late.csv"
+    path.write_text("".join(lines))
+    return path, row + 2    # as the messages number rows: the header is row 1
+
+
+@pytest.mark.parametrize("column,value,says", [
+    ("t_s", "100.0", "time tags must increase"),
+    ("sun_head", "7", "must be 0 (dss), 1 (cass1) or 2 (cass2)"),
+])
+def test_a_defect_late_in_the_file_is_one_line_and_nothing_written(gap_run, tmp_path, column,
+                                                                    value, says):
+    """A file that goes bad near its end (its last window) is refused before anything
+    is written: one line, exit 2, no output directory and no stage left beside it."""
+    from tests.scenarios.mc_helpers import run_cli
+    n = len(read_csv(gap_run / "telemetry.csv", only=["t_s"])["t_s"])
+    path, file_row = _late_defect(gap_run, tmp_path, n - 100, column, value)
+    out = tmp_path / "out"
+    rc, _, err = run_cli("estimate", path, "--scenario", gap_run / "scenario.yaml",
+                         "--out", out)
+    assert rc == 2 and err.count("\n") == 1 and says in err, err
+    if column == "t_s":
+        assert f"row {file_row}" in err
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["late.csv"]
