@@ -92,10 +92,16 @@ class StepNoise:
 def step_noise(params: ModelParams, t_s, groups, fixed: ProcessNoise) -> StepNoise:
     """``StepNoise`` of samples at times ``t_s`` for the named ``groups`` (θ_name sets
     each key of its group times its factor), the other keys held at ``fixed``'s."""
+    return interval_noise(params, intervals(t_s), groups, fixed)
+
+
+def interval_noise(params: ModelParams, dt, groups, fixed: ProcessNoise) -> StepNoise:
+    """``step_noise`` of step intervals ``dt`` (``intervals``; the distinct ones will do:
+    a likelihood reads each step's row by its interval)."""
     groups = tuple(dict(g) for g in (groups.values() if isinstance(groups, dict) else groups))
     seen = {k for g in groups for k in g}
     held = ProcessNoise(**{k: (0.0 if k in seen else getattr(fixed, k)) for k in NOISE_KEYS})
-    return StepNoise(params, intervals(t_s), groups, held)
+    return StepNoise(params, dt, groups, held)
 
 
 def step_rows(table: StepNoise, steps: np.ndarray, theta: np.ndarray, tail: np.ndarray,

@@ -242,10 +242,11 @@ class Likelihood:
             yield start, inputs, aux, x
 
     def _last(self, *args, **kw) -> np.ndarray:
-        x = np.asarray(args[2], dtype=float)
-        for *_, x in self._pass(*args, **kw):
-            pass
-        return x
+        """The state after a pass (``_pass``'s arguments)."""
+        last = np.asarray(args[2], dtype=float)
+        for *_, state in self._pass(*args, **kw):
+            last = state
+        return last
 
     def _p(self, theta) -> np.ndarray:
         theta = self._check(theta)

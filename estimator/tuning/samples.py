@@ -58,6 +58,16 @@ class ArraySamples:
                 None if self.dt is None else self.dt[start:stop])
 
 
+def distinct_intervals(samples: Samples, block: int) -> np.ndarray:
+    """The distinct step intervals of samples off the grid, sorted (``np.unique`` of
+    them all), a block at a time."""
+    seen = np.zeros(0)
+    for start in range(0, samples.n, block):
+        _, dt = samples.block(start, min(start + block, samples.n))
+        seen = np.union1d(seen, dt)
+    return seen
+
+
 class PairwiseSum:
     """``np.sum`` of a series of known length ``n`` fed in pieces of any size, to the
     last bit: numpy sums a contiguous array pairwise (halves rounded down to a multiple
@@ -140,7 +150,8 @@ class LaggedProducts:
     def _piece(self, k: int) -> None:
         whole = self._done == 0 and k == len(self._x) and self._done + k == self.n
         for j in range(self.sums.shape[1]):
-            for out, series in ((self.sums, self._x[:, j]), (self.pairs, self._m[:, j])):
+            for out, series in ((self.sums, np.ascontiguousarray(self._x[:, j])),
+                                (self.pairs, np.ascontiguousarray(self._m[:, j]))):
                 if whole:   # the whole series in one: autocorrelation's own FFT
                     size = 1 << int(np.ceil(np.log2(2 * k)))
                     f = np.fft.rfft(series, size)
