@@ -95,7 +95,7 @@ def open_streamed(source: Path, scenario=None, overrides=(), folder: Path | None
     store = Store(folder / "samples")
     tel = None
     try:
-        tel = open_source(path, s, folder / "telemetry", block_rows)
+        tel = open_source(path, s, folder, block_rows)      # its files beside the store
         rows = block_rows or BLOCK_ROWS
         written = write_store(store, tel, s, rows)
         stats = tel.stats(s.sample_interval_s)
