@@ -12,6 +12,7 @@ whole h (and t off the grid), 8 bytes a sample each.
 from __future__ import annotations
 
 import os
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,24 +44,28 @@ class Store:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self._fds: dict[str, int] = {}
+        self._lock = threading.Lock()      # the fit and the diagnostics read at once
 
     def append(self, name: str, values: np.ndarray) -> None:
         with open(self.folder / f"{name}.f8", "ab") as f:
             f.write(np.ascontiguousarray(values, dtype=np.float64).tobytes())
 
     def read(self, name: str, start: int, stop: int) -> np.ndarray:
-        if name not in self._fds:
-            self._fds[name] = os.open(self.folder / f"{name}.f8", os.O_RDONLY)
+        with self._lock:
+            if name not in self._fds:
+                self._fds[name] = os.open(self.folder / f"{name}.f8", os.O_RDONLY)
+            fd = self._fds[name]
         out = np.empty(max(stop - start, 0))
-        got = os.preadv(self._fds[name], [memoryview(out)], 8 * start)
+        got = os.preadv(fd, [memoryview(out)], 8 * start)
         if got != out.nbytes:
             raise OSError(f"{self.folder / name}.f8: short read at row {start}")
         return out
 
     def close(self) -> None:
-        for fd in self._fds.values():
-            os.close(fd)
-        self._fds.clear()
+        with self._lock:
+            for fd in self._fds.values():
+                os.close(fd)
+            self._fds.clear()
 
 
 @dataclass(frozen=True)
