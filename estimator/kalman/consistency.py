@@ -67,7 +67,11 @@ def whiteness(e: np.ndarray, max_lag: int) -> dict:
     |ρ|, and ρ at the first lag with 30 pairs (``rho_1``, at lag ``first_lag``: 1 for
     an update every sample; 2 for telemetry at every other sample, whose lag 1 has no
     pair at all).  None where there are too few samples to judge."""
-    rho, pairs = autocorrelation(e, max_lag)
+    return whiteness_of(*autocorrelation(e, max_lag))
+
+
+def whiteness_of(rho: np.ndarray, pairs: np.ndarray) -> dict:
+    """``whiteness`` from the autocorrelation ρ(k) and its pairs at each lag."""
     ok = pairs[1:] >= 30
     if not ok.any():
         return {"lags": 0, "fraction_outside": None, "max_abs_rho": None, "rho_1": None,

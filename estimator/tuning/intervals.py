@@ -92,10 +92,16 @@ class StepNoise:
 def step_noise(params: ModelParams, t_s, groups, fixed: ProcessNoise) -> StepNoise:
     """``StepNoise`` of samples at times ``t_s`` for the named ``groups`` (θ_name sets
     each key of its group times its factor), the other keys held at ``fixed``'s."""
+    return interval_noise(params, intervals(t_s), groups, fixed)
+
+
+def interval_noise(params: ModelParams, dt, groups, fixed: ProcessNoise) -> StepNoise:
+    """``step_noise`` of step intervals ``dt`` (``intervals``; the distinct ones will do:
+    a likelihood reads each step's row by its interval)."""
     groups = tuple(dict(g) for g in (groups.values() if isinstance(groups, dict) else groups))
     seen = {k for g in groups for k in g}
     held = ProcessNoise(**{k: (0.0 if k in seen else getattr(fixed, k)) for k in NOISE_KEYS})
-    return StepNoise(params, intervals(t_s), groups, held)
+    return StepNoise(params, dt, groups, held)
 
 
 def step_rows(table: StepNoise, steps: np.ndarray, theta: np.ndarray, tail: np.ndarray,
@@ -105,7 +111,15 @@ def step_rows(table: StepNoise, steps: np.ndarray, theta: np.ndarray, tail: np.n
     Q_d(θ) = Q_fixed + Σ θ_j U_j (Q_fixed alone without ``qd_of_theta``: the step then
     forms it), Q_e, the units U_j, then ``tail`` (the q_w map and θ), then per
     direction (group index or None, ∂q_w, ∂θ_R) its U_v, ∂q_w and ∂θ_R."""
-    used, local = np.unique(table.index[steps], return_inverse=True)
+    return distinct_rows(table, table.index[steps], theta, tail, directions, qd_of_theta)
+
+
+def distinct_rows(table: StepNoise, which: np.ndarray, theta: np.ndarray, tail: np.ndarray,
+                  directions: list[tuple[int | None, float, float]] | None,
+                  qd_of_theta: bool = True) -> np.ndarray:
+    """``step_rows`` of steps given by their distinct intervals ``which`` (indices into
+    ``table.distinct``)."""
+    used, local = np.unique(which, return_inverse=True)
     phi, gam, fixed, qe, units = table.tables(used)
     m, n_q = len(used), table.n_q
     qd = fixed + np.einsum("j,mjk->mk", theta[:n_q], units) if qd_of_theta else fixed

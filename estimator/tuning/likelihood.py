@@ -33,16 +33,20 @@ from functools import lru_cache
 import numpy as np
 from dynprop.rollout.chunks import ChunkedRollout
 
-from ..kalman.filter import Measurements, _inputs
+from ..kalman.filter import Measurements
 from ..kalman.steps import N_UT, pack
 from ..linear.model import N_STATES, ModelParams, ProcessNoise
 from ..linear.steps import per_step, roll_blocks
 from ..linear.transition import process_noise_integral
-from .intervals import BLOCK, StepNoise, step_rows
+from .intervals import BLOCK, StepNoise, distinct_rows
+from .samples import ArraySamples, Samples
 from .steps import N_ACC, N_BASE, likelihood_step, n_fisher, score_step, score_step_ad
 
 LOG_2PI = float(np.log(2 * np.pi))
 NOISE_KEYS = ("q_x", "q_z", "q_w", "q_px", "q_pz", "q_cx", "q_cz")
+# Samples per block of a pass: a multiple of the rollout's 4096-step chunk, ~13 MB of
+# inputs and innovations.
+PASS_BLOCK = 1 << 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,24 +141,36 @@ class Evaluation:
 class Likelihood:
     """The telemetry, prior and model of one filter run, ready to be evaluated at any
     θ: ``evaluate`` (one pass), ``score`` (one pass with sensitivities) and
-    ``innovations`` (ν and S at every sample).  Nothing is rebuilt per θ.
+    ``innovations`` (ν and S at every sample; ``innovation_blocks`` a block at a
+    time).  Nothing is rebuilt per θ.
 
     ``disc`` is the one step's ``Discretization`` on the scenario's grid, or for
-    telemetry off it a ``intervals.StepNoise`` of each step's own Φ, Γ and unit Q_d
-    (of the same groups as ``model``), whose rows each pass reads per step."""
+    telemetry off it a ``intervals.StepNoise`` of the steps' own Φ, Γ and unit Q_d
+    (of the same groups as ``model``) per distinct interval, whose rows each pass
+    reads per step.  The samples are read ``block`` at a time (``samples.Samples``;
+    whole arrays here, anything else through ``of_samples``), the filter's state
+    carried from block to block as it is from step to step: the same numbers."""
 
     def __init__(self, meas: Measurements, disc, x0, P0, model: NoiseModel, u=None,
-                 bridge_noise: np.ndarray | None = None, backend: str | None = None):
-        z, r = meas.z(), meas.r()
-        n = len(z)
-        self.model, self.n_samples = model, n
-        self.present = np.isfinite(z)
-        self.counts = self.present.sum(axis=0).astype(float)
-        e = np.zeros(n) if bridge_noise is None else np.asarray(bridge_noise, dtype=float)
-        if e.shape != (n,) or not np.all(np.isfinite(e) & (e >= 0)):
-            raise ValueError(f"bridge noise must be ({n},), finite and non-negative")
-        self.inputs = [np.where(self.present, z, 0.0), self.present.astype(float), r,
-                       _inputs(u, n), e]
+                 bridge_noise: np.ndarray | None = None, backend: str | None = None,
+                 block: int = PASS_BLOCK):
+        dt = disc.dt if isinstance(disc, StepNoise) else None
+        self._setup(ArraySamples(meas, u, bridge_noise, dt), disc, x0, P0, model, backend,
+                    block)
+
+    @classmethod
+    def of_samples(cls, samples: Samples, disc, x0, P0, model: NoiseModel,
+                   backend: str | None = None, block: int = PASS_BLOCK) -> Likelihood:
+        """The likelihood of ``samples`` read a block at a time (a record too long to
+        hold whole)."""
+        self = cls.__new__(cls)
+        self._setup(samples, disc, x0, P0, model, backend, block)
+        return self
+
+    def _setup(self, samples: Samples, disc, x0, P0, model: NoiseModel, backend, block):
+        self.samples, self.block = samples, int(block)
+        self.model, self.n_samples = model, int(samples.n)
+        self.counts = np.asarray(samples.counts, dtype=float)
         x0, P0 = np.asarray(x0, dtype=float), np.asarray(P0, dtype=float)
         self.s0 = np.concatenate([x0, pack(0.5 * (P0 + P0.T))])
         qw_coef = [g.get("q_w", 0.0) for g in model.groups]
@@ -162,8 +178,8 @@ class Likelihood:
         self.backend = backend
         self.steps = disc if isinstance(disc, StepNoise) else None
         if self.steps is not None:
-            if len(self.steps) != n or self.steps.groups != model.groups:
-                raise ValueError(f"the step table must hold the model's groups over {n} steps")
+            if self.steps.groups != model.groups:
+                raise ValueError("the step table must hold the model's groups")
             self._qw_map = np.array([qw_fixed, *qw_coef], dtype=float)
             return
         self._p_head = np.concatenate([
@@ -180,23 +196,57 @@ class Likelihood:
             raise ValueError(f"θ must be {self.model.n} finite non-negative numbers")
         return theta
 
-    def _roll(self, kind: str, theta, s0, every: bool, k: int = 0, idx=(),
-              qd_of_theta: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """One pass off the grid: the last state and (with ``every``) every step's aux,
-        each step's parameter row made a block at a time (``intervals.step_rows``)."""
-        theta = self._check(theta)
-        m = self.model
-        eng = _engine(kind, m.n_q, m.roll, self.backend, k, per=True)
-        tail = np.concatenate([self._qw_map, theta])
-        directions = [(j, m.groups[j].get("q_w", 0.0), 0.0) if j < m.n_q else (None, 0.0, 1.0)
-                      for j in idx]
+    def _which(self, dt: np.ndarray | None, start: int) -> np.ndarray:
+        """The step table's distinct interval of each step of a block."""
+        if dt is None:
+            raise ValueError("telemetry off the grid needs each step's interval")
+        d = self.steps.distinct
+        which = np.minimum(np.searchsorted(d, dt), len(d) - 1)
+        if not np.array_equal(d[which], dt):
+            raise ValueError(f"a step interval from sample {start} is not in the step table")
+        return which
 
-        def params_of(a, b):
-            return step_rows(self.steps, np.arange(a, b), theta, tail, directions, qd_of_theta)
-        cols = np.arange(eng.n_aux) if every else np.arange(0)
-        last, aux, _ = roll_blocks(eng, s0, self.inputs, self.n_samples, params_of, cols,
-                                   np.arange(0), np.arange(0), BLOCK)
-        return last, aux if every else None
+    def _pass(self, kind: str, theta, s0, keep: bool, k: int = 0, idx=(), p=None,
+              qd_of_theta: bool = True):
+        """One pass, a block at a time: yields (start, the block's inputs, its aux if
+        ``keep``, the state after it).  On the grid every step reads ``p``; off it each
+        step its own parameter row, made a few thousand steps at a time
+        (``intervals.distinct_rows``)."""
+        m = self.model
+        x = np.asarray(s0, dtype=float)
+        per = self.steps is not None
+        eng = _engine(kind, m.n_q, m.roll, self.backend, k, per=per)
+        if per:
+            theta = self._check(theta)
+            tail = np.concatenate([self._qw_map, theta])
+            directions = [(j, m.groups[j].get("q_w", 0.0), 0.0) if j < m.n_q
+                          else (None, 0.0, 1.0) for j in idx]
+        none = np.arange(0)
+        for start in range(0, self.n_samples, self.block):
+            stop = min(start + self.block, self.n_samples)
+            inputs, dt = self.samples.block(start, stop)
+            aux = None
+            if per:
+                which = self._which(dt, start)
+
+                def params_of(a, b, which=which):
+                    return distinct_rows(self.steps, which[a:b], theta, tail, directions,
+                                         qd_of_theta)
+                x, aux, _ = roll_blocks(eng, x, inputs, stop - start, params_of,
+                                        np.arange(eng.n_aux) if keep else none, none, none,
+                                        BLOCK)
+            elif keep:
+                x, aux = eng.run_final(x, inputs, p)
+            else:
+                x, _, _ = eng.run_columns(x, inputs, p, none, none, none)
+            yield start, inputs, aux, x
+
+    def _last(self, *args, **kw) -> np.ndarray:
+        """The state after a pass (``_pass``'s arguments)."""
+        last = np.asarray(args[2], dtype=float)
+        for *_, state in self._pass(*args, **kw):
+            last = state
+        return last
 
     def _p(self, theta) -> np.ndarray:
         theta = self._check(theta)
@@ -213,12 +263,8 @@ class Likelihood:
     def evaluate(self, theta) -> Evaluation:
         """ln L at θ: one filter pass, no history kept."""
         s0 = np.concatenate([self.s0, np.zeros(N_ACC)])
-        if self.steps is not None:
-            last, _ = self._roll("ll", theta, s0, False)
-            return self._finish(theta, last[N_BASE:N_BASE + N_ACC])
-        eng = _engine("ll", self.model.n_q, self.model.roll, self.backend)
-        last, _, _ = eng.run_columns(s0, self.inputs, self._p(theta), np.arange(0),
-                                     np.arange(0), np.arange(0))
+        p = None if self.steps is not None else self._p(theta)
+        last = self._last("ll", theta, s0, False, p=p)
         return self._finish(theta, last[N_BASE:N_BASE + N_ACC])
 
     def score(self, theta, subset=None, derived: bool = True) -> Evaluation:
@@ -231,19 +277,17 @@ class Likelihood:
         idx = np.arange(n) if subset is None else np.asarray(subset, dtype=np.int64)
         k = len(idx) if derived else n
         s0 = np.concatenate([self.s0, np.zeros(N_ACC + N_BASE * k + k + n_fisher(k))])
-        if self.steps is not None:
-            last, _ = (self._roll("score", theta, s0, False, k, idx) if derived else
-                       self._roll("score_ad", theta, s0, False, qd_of_theta=False))
-        else:
+        p = None
+        if self.steps is None:
             p = self._p(theta)
             if derived:
-                eng = _engine("score", self.model.n_q, self.model.roll, self.backend, k)
                 p = np.concatenate([p, self._directions(idx)])
             else:     # the step forms Q_d(θ) itself from Q_fixed
-                eng = _engine("score_ad", self.model.n_q, self.model.roll, self.backend)
                 p[self._qd] = pack(self.model.Qd_fixed)
-            last, _, _ = eng.run_columns(s0, self.inputs, p, np.arange(0), np.arange(0),
-                                         np.arange(0))
+        if derived:
+            last = self._last("score", theta, s0, False, k, idx, p=p)
+        else:
+            last = self._last("score_ad", theta, s0, False, p=p, qd_of_theta=False)
         ev = self._finish(theta, last[N_BASE:N_BASE + N_ACC])
         i = N_BASE + N_ACC + N_BASE * k
         F = np.zeros((k, k))
@@ -263,18 +307,24 @@ class Likelihood:
                 out += [np.zeros(N_UT), [0.0], [1.0]]
         return np.concatenate(out) if out else np.zeros(0)
 
+    def innovation_blocks(self, theta):
+        """ν and S (k, 3: roll, yaw, h) at θ, NaN where no update, a block of samples
+        at a time: yields (first sample, ν, S)."""
+        s0 = np.concatenate([self.s0, np.zeros(N_ACC)])
+        p = None if self.steps is not None else self._p(theta)
+        for start, inputs, aux, _ in self._pass("ll", theta, s0, True, p=p):
+            absent = inputs[1] == 0.0
+            nu, S = aux[:, :3].copy(), aux[:, 3:].copy()
+            nu[absent] = np.nan
+            S[absent] = np.nan
+            yield start, nu, S
+
     def innovations(self, theta) -> tuple[np.ndarray, np.ndarray]:
         """ν and S (N, 3: roll, yaw, h) at θ, NaN where no update."""
-        s0 = np.concatenate([self.s0, np.zeros(N_ACC)])
-        if self.steps is not None:
-            _, aux = self._roll("ll", theta, s0, True)
-        else:
-            eng = _engine("ll", self.model.n_q, self.model.roll, self.backend)
-            _, aux = eng.run_final(s0, self.inputs, self._p(theta))
-        nu, S = aux[:, :3].copy(), aux[:, 3:].copy()
-        nu[~self.present] = np.nan
-        S[~self.present] = np.nan
-        return nu, S
+        blocks = [b[1:] for b in self.innovation_blocks(theta)]
+        if not blocks:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        return tuple(np.concatenate(parts) for parts in zip(*blocks, strict=True))
 
 
 __all__ = ["Evaluation", "Likelihood", "NoiseModel", "likelihood_step",

@@ -12,10 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from dynprop.estimator.analysis.covariance import approx_yaw_variance
 from dynprop.estimator.analysis.covariance_report import covariance_report
-from dynprop.estimator.kalman.consistency import chi2_bounds, whiteness
 from dynprop.estimator.linear.model import ProcessNoise
 from dynprop.estimator.linear.transition import discretize
-from dynprop.estimator.tuning.intervals import step_noise
+from dynprop.estimator.tuning.intervals import interval_noise
 from dynprop.estimator.tuning.likelihood import NOISE_KEYS, Likelihood, noise_model
 from dynprop.estimator.tuning.maximum import (
     DETERMINED_SIGMA,
@@ -25,10 +24,12 @@ from dynprop.estimator.tuning.maximum import (
     nearest_allowed,
     profile,
 )
+from dynprop.estimator.tuning.samples import distinct_intervals
 
 from ..bridge.covariance import dss_yaw_weighting
 from ..config import build
 from ..units import RAD2DEG
+from .innovations import Diagnostics, innovation_diagnostics
 from .source import TuneError, TuneSource
 
 ROLL = "roll_variance"       # the optional factor on the Earth sensor's roll variance
@@ -38,7 +39,6 @@ ROLL = "roll_variance"       # the optional factor on the Earth sensor's roll va
 DEFAULT_BOUNDS = {"q_x": (1e-14, 1e-4), "q_z": (1e-14, 1e-4), "q_w": (1e-14, 1e-4),
                   "q_px": (1e-26, 1e-12), "q_pz": (1e-26, 1e-12), "q_cx": (1e-26, 1e-12),
                   "q_cz": (1e-26, 1e-12), ROLL: (1e-2, 1e2)}
-MAX_LAG_S = 600.0            # innovation autocorrelation to this lag
 
 
 @dataclass(frozen=True)
@@ -94,19 +94,6 @@ def option_problems(o: TuneOptions) -> list[str]:
 
 
 @dataclass(frozen=True)
-class Diagnostics:
-    """The filter's innovations at one noise setting: NIS per measurement kind against
-    its χ² bounds, and whiteness of the standardised innovations."""
-
-    loglik: float
-    nis: dict
-    whiteness: dict
-    rho: dict                      # kind -> ρ(k), k = 0 … max lag
-    hourly_nis: dict               # kind -> (hours, mean NIS per hour)
-    sigma_yaw_deg: dict
-
-
-@dataclass(frozen=True)
 class TuneResult:
     source: TuneSource
     options: TuneOptions
@@ -141,40 +128,8 @@ def _sigma_yaw(src: TuneSource, noise: ProcessNoise, roll_factor: float) -> dict
 
 def diagnostics(lik: Likelihood, theta, src: TuneSource, noise: ProcessNoise,
                 roll_factor: float) -> Diagnostics:
-    nu, S = lik.innovations(theta)
-    e = nu / np.sqrt(S)
-    # Off the grid, lags in samples at the median cadence (a gap's rows are not there).
-    dt = src.cadence_s
-    lags = int(round(MAX_LAG_S / dt))
-    nis, white, rho, hourly = {}, {}, {}, {}
-    from dynprop.estimator.kalman.consistency import autocorrelation
-    per_hour = int(round(3600 / dt))
-    for i, kind in enumerate(("roll", "yaw", "h")):
-        ok = np.isfinite(e[:, i])
-        n = int(ok.sum())
-        mean = float(np.mean(e[ok, i] ** 2)) if n else None
-        nis[kind] = {"mean": mean, "updates": n,
-                     "bounds": list(chi2_bounds(1, n)) if n else None,
-                     "inside": None if not n else bool(chi2_bounds(1, n)[0] <= mean
-                                                       <= chi2_bounds(1, n)[1])}
-        white[kind] = whiteness(e[:, i], lags)
-        rho[kind] = autocorrelation(e[:, i], lags)[0]
-        sq = np.where(ok, e[:, i] ** 2, 0.0)
-        if src.regular:
-            m = len(sq) // per_hour * per_hour
-            cnt = ok[:m].reshape(-1, per_hour).sum(axis=1)
-            total = sq[:m].reshape(-1, per_hour).sum(axis=1)
-        else:   # by the samples' own times: whole hours from the first sample
-            hour = ((src.t_s - src.t_s[0]) // 3600).astype(np.int64)
-            whole = hour < hour[-1] if hour[-1] > 0 else np.ones(len(hour), bool)
-            cnt = np.bincount(hour[whole], weights=ok[whole])
-            total = np.bincount(hour[whole], weights=sq[whole])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            hourly[kind] = (np.arange(len(cnt)) + 0.5,
-                            np.where(cnt > 0, total / cnt, np.nan))
-    ok = np.isfinite(nu)
-    ll = -0.5 * float(np.sum(np.log(2 * np.pi * S[ok]) + nu[ok] ** 2 / S[ok]))
-    return Diagnostics(ll, nis, white, rho, hourly, _sigma_yaw(src, noise, roll_factor))
+    """The filter's innovations at θ (``innovations``) and its σ_yaw at that noise."""
+    return innovation_diagnostics(lik, theta, src, _sigma_yaw(src, noise, roll_factor))
 
 
 def _status(fit: Fit, j: int) -> str:
@@ -225,27 +180,16 @@ COARSE_TOL = 0.5   # the coarse maximum need only be near: the full likelihood f
 
 def _likelihood(src: TuneSource, opts: TuneOptions, every: int) -> Likelihood:
     """The filter's likelihood of the telemetry, or of every ``every``-th sample with
-    the filter stepping ``every`` samples at a time: the inputs ū held over a step are
-    the mean of its samples' (Eq. 31), a bridged dropout's noise density its mean.
-    Off the grid each step spans its own interval (to the ``every``-th sample after),
-    its Φ, Γ and unit Q_d evaluated once per distinct interval (``tuning.intervals``)."""
+    the filter stepping ``every`` samples at a time (``src.samples``).  Off the grid
+    each step spans its own interval, its Φ, Γ and unit Q_d evaluated once per
+    distinct interval (``tuning.intervals``)."""
     dt = src.cadence_s * every
     model = noise_model(src.params, dt, opts.groups(), src.noise, opts.roll_variance)
+    samples = src.samples(every)
     disc = (discretize(src.params, src.noise, dt) if src.regular else
-            step_noise(src.params, src.t_s[::every], opts.groups(), src.noise))
-    meas, u, e = src.meas, src.u, src.bridge_noise
-    if every > 1:
-        n = len(meas.roll_rad)
-        pad = (-n) % every
-
-        def mean(a):
-            a = np.concatenate([a, np.repeat(a[-1:], pad, axis=0)])
-            return a.reshape(-1, every, *a.shape[1:]).mean(axis=1)
-        meas = type(meas)(*(np.asarray(v)[::every] if np.ndim(v) else v for v in
-                            (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll,
-                             meas.var_yaw, meas.var_h)))
-        u, e = mean(u), None if e is None else mean(e)
-    return Likelihood(meas, disc, src.x0, src.P0, model, u=u, bridge_noise=e)
+            interval_noise(src.params, distinct_intervals(samples, src.block), opts.groups(),
+                           src.noise))
+    return Likelihood.of_samples(samples, disc, src.x0, src.P0, model, block=src.block)
 
 
 def tune(src: TuneSource, opts: TuneOptions) -> TuneResult:

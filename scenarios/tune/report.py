@@ -12,8 +12,9 @@ from dynprop.estimator.analysis.covariance import PAPER_SIGMA_YAW_DEG
 from dynprop.estimator.tuning.likelihood import NOISE_KEYS
 
 from ..files.screen import screen_messages
-from .fit import ROLL, Diagnostics, TuneOptions, TuneResult, tune
-from .source import read_source
+from .fit import ROLL, Diagnostics, TuneOptions, TuneResult, option_problems, tune
+from .source import TuneError, locate
+from .streamed import open_streamed
 
 LABELS = {"q_x": "roll torque q_x", "q_z": "yaw torque q_z", "q_w": "wheel torque q_w",
           "q_px": "periodic roll torque walk q_px", "q_pz": "periodic yaw torque walk q_pz",
@@ -46,7 +47,7 @@ def report_dict(r: TuneResult, command: str | None = None) -> dict:
     roll = None
     if ROLL in r.entries:
         e = r.entries[ROLL]
-        base = float(np.median(np.broadcast_to(src.meas.var_roll, src.t_s.shape)))
+        base = src.roll_variance()
         roll = {**e, "variance_rad2": base * e["value"],
                 "sigma_deg": float(np.degrees(np.sqrt(base * e["value"]))),
                 "note": "reported only: the scenario's sensors section sets both the "
@@ -57,9 +58,7 @@ def report_dict(r: TuneResult, command: str | None = None) -> dict:
         "telemetry": {"file": str(src.telemetry),
                       "run_dir": None if src.run_dir is None else str(src.run_dir),
                       "span_h": src.span_s / 3600, **src.stats,
-                      "updates": {k: int(np.isfinite(v).sum()) for k, v in
-                                  (("roll", src.meas.roll_rad), ("yaw", src.meas.yaw_rad),
-                                   ("h", src.meas.h_Nms))},
+                      "updates": src.updates(),
                       "sun_gap_h": src.gap_s() / 3600,
                       # The periodic covariance's gap: measured, or the paper's 8 h.
                       "sun_gap_measured": src.measured_gap_s() is not None},
@@ -162,16 +161,27 @@ def report_md(d: dict) -> str:
 
 def run_tune(source: Path, scenario=None, overrides: list[str] = (), out: Path | None = None,
              options: TuneOptions | None = None, force: bool = True,
-             command: str | None = None) -> tuple[dict, Path]:
-    """Everything `dynprop tune` does; returns tune.json's dictionary and the directory."""
+             command: str | None = None, block_rows: int | None = None
+             ) -> tuple[dict, Path]:
+    """Everything `dynprop tune` does; returns tune.json's dictionary and the directory.
+    ``block_rows``: ``streamed.open_streamed``'s test hook."""
     options = options or TuneOptions()
     from ..figures.tune import tune_figure
     from ..files.rundir import staged_run_dir
-    src = read_source(Path(source), scenario, overrides)
-    out = Path(out) if out is not None else (src.run_dir or src.telemetry.parent) / "tune"
-    r = tune(src, options)
-    d = report_dict(r, command)
+    source = Path(source)
+    locate(source, scenario, overrides)      # what is wrong with the arguments, first
+    problems = option_problems(options)
+    if problems:
+        raise TuneError("\n".join(problems))
+    out = Path(out) if out is not None else (source if source.is_dir() else
+                                             source.parent) / "tune"
+    # The telemetry is read into scratch files in the stage, removed before it becomes
+    # ``out``; a file refused, or a tune that fails, leaves nothing.
     with staged_run_dir(out, force=force) as stage:
+        with open_streamed(source, scenario, overrides, stage / ".scratch",
+                           block_rows) as src:
+            r = tune(src, options)
+            d = report_dict(r, command)
         (stage / "tune.json").write_text(json.dumps(d, indent=2, allow_nan=False) + "\n")
         (stage / "tune.md").write_text(report_md(d))
         (stage / "tuned_noise.yaml").write_text(noise_yaml(d))
