@@ -1,0 +1,341 @@
+"""The streamed telemetry reader (``files.spool``, issue 44) against the whole read.
+
+``open_source`` reads a file in blocks into scratch columns; every answer it gives
+(samples by range, steps off the grid, the median step, the stats, the screen's report
+and the screened rows' times) must be ``WholeSource``'s, bit for bit, whatever the
+block size, and every bad file must get the whole read's message.  The reference is
+the whole read (``read_screened`` + ``on_grid``) of the same file, an independent code
+path; the files are slices of a run's telemetry.csv edited as text the way a ground
+system's file differs from dynprop's: rows dropped, jittered tags, ISO tags alone,
+spikes and ``nan`` text, Parquet.  Blocks of 1 and 7 rows and hypothesis' sizes put a
+block boundary next to every edit.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from scenarios.config.loader import load_scenario
+from scenarios.files.rundir import RunDirError
+from scenarios.files.spool import blocks, select, times
+from scenarios.files.telemetry_reader import tag_ns
+from scenarios.files.telemetry_source import open_source, whole_source
+
+ROWS = 1200                 # rows of the run kept: 10 min at 0.512 s
+EPOCH_NS = np.datetime64("2026-03-20T12:00:00", "ns")
+
+
+@pytest.fixture(scope="module")
+def base(run6):
+    """The run's comment line, header and first ROWS rows, as cells."""
+    with open(run6 / "telemetry.csv") as fh:
+        comment = fh.readline()
+        header = fh.readline().rstrip("\n").split(",")
+        rows = [next(fh).rstrip("\n").split(",") for _ in range(ROWS)]
+    return comment, header, rows
+
+
+@pytest.fixture(scope="module")
+def scenario(run6):
+    # A shorter max gap, so that the holes below are listed in the stats' gaps.
+    return load_scenario(run6 / "scenario.yaml", ["estimator.max_gap_s=20"])
+
+
+def _write(path: Path, comment: str, header: list[str], rows: list[list[str]],
+           newline: str = "\n") -> Path:
+    path.write_text("".join([comment, ",".join(header) + newline]
+                            + [",".join(r) + newline for r in rows]), newline="")
+    return path
+
+
+def _drop(header, rows, name):
+    j = header.index(name)
+    return [h for i, h in enumerate(header) if i != j], [r[:j] + r[j + 1:] for r in rows]
+
+
+def _set(header, rows, row, name, text):
+    rows[row][header.index(name)] = text
+
+
+def _tags(t_s: np.ndarray) -> list[str]:
+    ns = EPOCH_NS + np.rint(t_s * 1e9).astype(np.int64).astype("timedelta64[ns]")
+    return [x + "Z" for x in np.datetime_as_string(ns, unit="ms")]
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64).view(np.int64)
+
+
+def assert_same(path: Path, s, block_rows, folder: Path) -> None:
+    """Every answer of the streamed source equals the whole read's, or both refuse
+    the file with the same message."""
+    try:
+        whole, expected = whole_source(path, s), None
+    except RunDirError as exc:
+        whole, expected = None, str(exc)
+    try:
+        src, got = open_source(path, s, folder, block_rows), None
+    except RunDirError as exc:
+        src, got = None, str(exc)
+    assert got == expected
+    assert list(folder.iterdir()) == [] if src is None else len(list(folder.iterdir())) == 1
+    if whole is None:
+        return
+    try:
+        assert (src.regular, src.n, src.n_rows, src.names) == \
+            (whole.regular, whole.n, whole.n_rows, whole.names)
+        n = whole.n
+        for a, b in [(0, n), (0, 1), (n - 3, n + 5), (5, 6), (n // 3, 2 * n // 3), (7, 7)]:
+            w, g = whole.columns(a, b), src.columns(a, b)
+            assert list(w) == list(g)
+            for name in w:
+                assert np.array_equal(_bits(w[name]), _bits(g[name])), (name, a, b)
+            ws, gs = whole.steps(a, b), src.steps(a, b)
+            assert (ws is None) == (gs is None)
+            if ws is not None:
+                assert np.array_equal(_bits(ws), _bits(gs)), (a, b)
+        assert _bits(src.median_step_s()) == _bits(whole.median_step_s())
+        for dt in (s.sample_interval_s, 0.25):
+            assert src.stats(dt) == whole.stats(dt)
+        assert np.array_equal(_bits(src.screened_t_s()), _bits(whole.screened_t_s()))
+        assert src.screen.count == whole.screen.count
+        assert np.array_equal(src.screen.rows_any(), whole.screen.rows_any())
+        assert src.screen.summary() == whole.screen.summary()
+    finally:
+        src.close()
+    assert list(folder.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- files
+
+def clean(base, tmp: Path) -> Path:
+    comment, header, rows = base
+    return _write(tmp / "clean.csv", comment, header, [list(r) for r in rows])
+
+
+def holes(base, tmp: Path) -> Path:
+    """On the grid with steps missing: single rows, a run of rows, every other row
+    for a while (a 1.024 s stretch) and a 25 s hole."""
+    comment, header, rows = base
+    gone = {3, 7, 8, 400, *range(100, 149), *range(600, 700, 2)}
+    return _write(tmp / "holes.csv", comment, header,
+                  [list(r) for i, r in enumerate(rows) if i not in gone])
+
+
+def jittered(base, tmp: Path, iso_only: bool = False) -> Path:
+    """Off the grid: ±50 ms on every tag, some rows dropped (dropouts), with the
+    tags written as ISO UTC alone when ``iso_only``."""
+    comment, header, rows = base
+    rng = np.random.default_rng(44)
+    rows = [list(r) for i, r in enumerate(rows) if i % 9 != 4 and not 700 <= i < 760]
+    t = np.array([float(r[0]) for r in rows]) + rng.uniform(-0.05, 0.05, len(rows))
+    t[0] = 0.0
+    for r, v, tag in zip(rows, t, _tags(t), strict=True):
+        r[0], r[-1] = repr(float(v)), tag
+    if iso_only:
+        header, rows = _drop(header, rows, "t_s")
+    return _write(tmp / f"jitter{'_iso' * iso_only}.csv", comment, header, rows)
+
+
+def iso_only(base, tmp: Path) -> Path:
+    comment, header, rows = base
+    header, rows = _drop(header, [list(r) for r in rows], "t_s")
+    return _write(tmp / "iso.csv", comment, header, rows)
+
+
+def spiked(base, tmp: Path) -> Path:
+    """Values the screen takes out, next to 7-row block edges and at the file's ends:
+    wheel jumps (rows 6, 7, 13, 14), the first wheel1 reading out of range and the
+    last wheel2 reading a jump (both held from the nearest good one), a roll jump,
+    ``nan``/``inf`` text, an out-of-range wheel, a Sun angle outside its head's field of view,
+    a yaw σ of 0 (its yaw goes with it) and a sun_head left empty."""
+    comment, header, rows = base
+    rows = [list(r) for r in rows]
+    for k in (6, 7, 13, 14):
+        _set(header, rows, k, "wheel1_rpm", "6500.0")
+    _set(header, rows, 0, "wheel1_rpm", "99999.0")
+    _set(header, rows, ROWS - 1, "wheel2_rpm", "4000.5")
+    _set(header, rows, ROWS - 3, "roll_deg", "5.0")
+    _set(header, rows, 20, "pitch_deg", "nan")
+    _set(header, rows, 21, "yaw_deg", "NaN")
+    _set(header, rows, 22, "wheel2_rpm", "-inf")
+    _set(header, rows, 500, "wheel2_rpm", "1e308")
+    _set(header, rows, 501, "yaw_sigma_deg", "0.0")
+    _set(header, rows, 502, "sun_head", "")
+    lit = next(c for c in ("dss_alpha_deg", "cass1_alpha_deg", "cass2_alpha_deg")
+               if rows[505][header.index(c)])
+    _set(header, rows, 505, lit, "120.0")
+    _set(header, rows, 30, "roll_deg", "")      # a dropout between jump readings
+    _set(header, rows, 31, "roll_deg", "")
+    return _write(tmp / "spiked.csv", comment, header, rows, newline="\r\n")
+
+
+def parquet(base, tmp: Path, timestamps: bool) -> Path:
+    """The spiked rows as Parquet: numbers as doubles (empty cells null), the tags
+    as text or as a timestamp column, the epoch in the metadata."""
+    pa = pytest.importorskip("pyarrow")
+    pq = pytest.importorskip("pyarrow.parquet")
+    comment, header, rows = base
+    src = spiked(base, tmp)
+    lines = src.read_text().splitlines()[2:]
+    cells = [line.split(",") for line in lines if line]
+    cols = {}
+    for j, name in enumerate(header):
+        text = [c[j] for c in cells]
+        if name == "time_utc":
+            cols[name] = (pa.array(np.array([x.rstrip("Z") for x in text],
+                                            dtype="datetime64[ms]"), pa.timestamp("ms"))
+                          if timestamps else pa.array(text))
+        else:
+            cols[name] = pa.array([float(x) if x else None for x in text], pa.float64())
+    table = pa.table(cols).replace_schema_metadata({"epoch_utc": comment.split(": ")[1].strip()})
+    path = tmp / f"spiked{'_ts' * timestamps}.parquet"
+    pq.write_table(table, path, row_group_size=500)
+    return path
+
+
+FILES = {"clean": clean, "holes": holes, "jittered": jittered,
+         "jittered_iso": lambda b, t: jittered(b, t, iso_only=True), "iso": iso_only,
+         "spiked": spiked}
+
+
+@pytest.fixture(scope="module")
+def files(base, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("spool_files")
+    return {name: make(base, tmp) for name, make in FILES.items()}
+
+
+# --------------------------------------------------------------------------- equivalence
+
+@pytest.mark.parametrize("name", list(FILES))
+@pytest.mark.parametrize("block_rows", [1, 7, None])
+def test_every_answer_is_the_whole_reads(files, scenario, tmp_path, name, block_rows):
+    assert_same(files[name], scenario, block_rows, tmp_path)
+
+
+@settings(max_examples=12, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(block_rows=st.integers(2, 400), name=st.sampled_from(list(FILES)))
+def test_any_block_size(files, scenario, tmp_path_factory, block_rows, name):
+    assert_same(files[name], scenario, block_rows, tmp_path_factory.mktemp("spool"))
+
+
+def test_the_edits_are_screened(files, scenario, tmp_path):
+    """The spiked file exercises what it is meant to: every rule, and both held ends."""
+    src = open_source(files["spiked"], scenario, tmp_path, 7)
+    summary = src.screen.summary()
+    src.close()
+    reasons = {r for c in summary["columns"].values() for r in c["reasons"]}
+    assert reasons == {"non-finite", "range", "field of view", "jump"}
+    assert [(h["column"], h["row"]) for h in summary["held_at_ends"]] == \
+        [("wheel1_rpm", 2), ("wheel2_rpm", ROWS + 1)]
+    assert summary["columns"]["wheel1_rpm"]["reasons"]["jump"]["first_rows"] == [8, 9, 15, 16]
+
+
+@pytest.mark.parametrize("timestamps", [False, True])
+@pytest.mark.parametrize("block_rows", [7, 333, None])
+def test_parquet(base, scenario, tmp_path, timestamps, block_rows):
+    path = parquet(base, tmp_path, timestamps)
+    (tmp_path / "scratch").mkdir()
+    assert_same(path, scenario, block_rows, tmp_path / "scratch")
+
+
+# --------------------------------------------------------------------------- bad files
+
+def _bad(base, tmp: Path, what: str) -> Path:
+    comment, header, rows = base
+    rows = [list(r) for r in rows]
+    late = ROWS - 40
+    if what == "decreasing":
+        # The tags stop increasing late in the file (the issue's day 20, in small).
+        rows[late][0], rows[late + 1][0] = rows[late + 1][0], rows[late][0]
+    elif what == "non-finite tag":
+        rows[late][0] = "nan"
+    elif what == "bad iso tag":
+        header, rows = _drop(header, rows, "t_s")
+        rows[late][-1] = "2026-03-20T12:99:00Z"
+    elif what == "empty and zoned tags":
+        header, rows = _drop(header, rows, "t_s")
+        rows[10][-1] = "2026-03-20T12:00:05+01:00"
+        rows[late][-1] = ""
+    elif what == "sun head":
+        rows[late][header.index("sun_head")] = "3.0"
+    elif what == "ragged row":
+        rows[late] = rows[late][:-2]
+    elif what == "wheel end":
+        rows[-1][header.index("wheel2_rpm")] = ""
+    elif what == "units":
+        j = header.index("wheel1_rpm")
+        for r in rows:
+            r[j] = repr(float(r[j]) * math.pi / 30)
+    return _write(tmp / f"{what.replace(' ', '_')}.csv", comment, header, rows)
+
+
+BAD = ("decreasing", "non-finite tag", "bad iso tag", "empty and zoned tags", "sun head",
+       "ragged row", "wheel end", "units")
+
+
+@pytest.mark.parametrize("what", BAD)
+@pytest.mark.parametrize("block_rows", [7, None])
+def test_bad_files_get_the_whole_reads_message(base, scenario, tmp_path, what, block_rows):
+    path = _bad(base, tmp_path, what)
+    with pytest.raises(RunDirError) as whole:
+        whole_source(path, scenario)
+    (tmp_path / "scratch").mkdir()
+    with pytest.raises(RunDirError) as streamed:
+        open_source(path, scenario, tmp_path / "scratch", block_rows)
+    assert str(streamed.value) == str(whole.value)
+    assert list((tmp_path / "scratch").iterdir()) == []
+
+
+# --------------------------------------------------------------------------- parts
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False, width=64), min_size=1,
+                max_size=60), st.integers(1, 9))
+def test_select_median_is_numpys(values, parts):
+    x = np.array(values)
+    chunks = np.array_split(x, parts)
+    got = select.median(lambda: iter(chunks))
+    assert got == np.median(x)
+    if np.median(x) != 0:
+        assert _bits(got) == _bits(np.median(x))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(-2208988800 * 10**9, 7258118399 * 10**9), st.integers(0, 9),
+       st.booleans())
+def test_fixed_layout_tags_are_numpys(ns, digits, zulu):
+    """The fast reading of telemetry.csv's tags gives tag_ns' nanoseconds (1900–2199,
+    any number of fraction digits)."""
+    unit = {0: "s", 3: "ms", 6: "us", 9: "ns"}.get(digits)
+    if unit is None:
+        text = np.datetime_as_string(np.array([ns], dtype="datetime64[ns]"), unit="ns")[0]
+        text = text[:20 + digits] if digits else text[:19]
+    else:
+        text = np.datetime_as_string(np.array([ns], dtype="datetime64[ns]"), unit=unit)[0]
+    tags = np.array([text + "Z" * zulu] * 3)
+    expected, problems = tag_ns(Path("x"), "time_utc", tags)
+    assert not problems
+    assert np.array_equal(times.fixed_layout_ns(tags), expected)
+
+
+@pytest.mark.parametrize("tag", ["2026-02-29T00:00:00Z", "2024-04-31T00:00:00",
+                                 "2026-03-20T24:00:00", "2026-03-20T12:00:60",
+                                 "2026-03-20T12:00:00.Z", "2026-03-20 12:00:00",
+                                 "2026-03-20T12:00:00.1234567891"])
+def test_fixed_layout_leaves_the_rest_to_numpy(tag):
+    assert times.fixed_layout_ns(np.array([tag])) is None
+
+
+def test_arrow_reads_as_loadtxt_does():
+    """The CSV fast path is taken only when pyarrow reads every hard cell to loadtxt's
+    double (it does with the pyarrow this suite installs)."""
+    pytest.importorskip("pyarrow")
+    assert blocks.arrow_agrees()
