@@ -28,7 +28,8 @@ from ..csvio import _first_bad_row, _parse_body, comments
 from ..rundir import RunDirError
 from ..telemetry_reader import NS_PER
 
-CHUNK_CHARS = 32 << 20      # text read per block: ~300 k telemetry rows
+CHUNK_CHARS = 4 << 20       # text read per block: ~38 k telemetry rows (a larger block is
+                            # no faster, and malloc keeps more of it)
 PARQUET_BATCH = 1 << 18
 
 
@@ -123,20 +124,11 @@ def _rest_is_blank(fh, path) -> bool:
 def _chunks(fh, block_rows: int | None) -> Iterator:
     """The text (or bytes) after the header in pieces that end at a line's end (the
     last at the file's), of ``block_rows`` lines each when given."""
-    piece = fh.read(CHUNK_CHARS)
-    nl = "\n" if isinstance(piece, str) else b"\n"
-    carry = piece[:0]
-    while True:
-        text = carry + piece if carry else piece
-        cut = len(text) if not piece else text.rfind(nl) + 1
-        if not piece or cut:
-            carry = text[cut:]
-            yield from _by_lines(text[:cut] if cut < len(text) else text, block_rows, nl)
-        else:
-            carry = text
-        if not piece:
-            return
-        piece = fh.read(CHUNK_CHARS)
+    while piece := fh.read(CHUNK_CHARS):
+        nl = "\n" if isinstance(piece, str) else b"\n"
+        if not piece.endswith(nl):
+            piece += fh.readline()
+        yield from _by_lines(piece, block_rows, nl)
 
 
 def _by_lines(text, block_rows: int | None, nl) -> Iterator:
@@ -306,10 +298,8 @@ def arrow_agrees() -> bool:
 
 def _arrow_reader(names, text, numbers):
     """A chunk's columns by pyarrow (None when it refuses the chunk): quotes, escapes
-    and comments are not CSV syntax here, as for loadtxt; an empty cell is NaN and an
-    empty or ``nan`` tag "" (``_parse_body`` reads both as "nan")."""
+    and comments are not CSV syntax here, as for loadtxt; an empty cell is NaN."""
     import pyarrow as pa
-    import pyarrow.compute as pc
     import pyarrow.csv as pacsv
 
     read_opts = pacsv.ReadOptions(column_names=names, block_size=1 << 24)
@@ -320,10 +310,14 @@ def _arrow_reader(names, text, numbers):
         quoted_strings_can_be_null=False,
         column_types={**{n: pa.float64() for n in numbers}, **{n: pa.string() for n in text}})
 
+    # malloc's pool: arrow's own (mimalloc) keeps tens of MB it has freed.
+    pool = pa.system_memory_pool()
+
     def read(chunk: str | bytes) -> dict[str, object] | None:
         data = chunk.encode() if isinstance(chunk, str) else chunk
         try:
-            table = pacsv.read_csv(pa.py_buffer(data), read_opts, parse_opts, conv_opts)
+            table = pacsv.read_csv(pa.py_buffer(data), read_opts, parse_opts, conv_opts,
+                                   memory_pool=pool)
         except (pa.ArrowException, ValueError):
             return None
         out = {}
@@ -332,8 +326,10 @@ def _arrow_reader(names, text, numbers):
                 # (An empty cell, null, becomes NaN: arrow_agrees checks its bits.)
                 out[name] = table.column(name).to_numpy()
             elif name in text:
-                col = pc.fill_null(table.column(name).combine_chunks(), "")
-                out[name] = pc.if_else(pc.equal(col, "nan"), "", col)
+                # Left as arrow strings (times.fixed_layout_ns reads their bytes);
+                # times._as_text turns them into _parse_body's text, null and "nan"
+                # both "".
+                out[name] = table.column(name).combine_chunks()
         return out
     return read
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-READ_ROWS = 1 << 20         # rows per chunk when a whole column is swept
+READ_ROWS = 1 << 18         # rows per chunk when a whole column is swept (2 MB)
 
 
 class Columns:

@@ -75,7 +75,9 @@ class JumpCarry:
         self.decided += len(i)
         keep = min(CARRY, len(x))
         self.g0 = m - keep
-        self.x, self.t, self.rows = x[len(x) - keep:], t[len(x) - keep:], rows[len(x) - keep:]
+        # Copies: a view would keep the whole block's readings alive.
+        self.x, self.t, self.rows = (x[len(x) - keep:].copy(), t[len(x) - keep:].copy(),
+                                     rows[len(x) - keep:].copy())
         return out
 
 

@@ -139,10 +139,12 @@ class Times:
 
 
 def _as_text(tags) -> np.ndarray:
-    """A block's tags as NumPy text (pyarrow's strings converted)."""
+    """A block's tags as NumPy text (pyarrow's strings as ``_parse_body`` gives them)."""
     if isinstance(tags, np.ndarray):
         return tags
-    return np.array(tags.to_pylist(), dtype=str)
+    # _parse_body reads an empty cell as "nan", and then "nan" as "".
+    return np.array(["" if v is None or v == "nan" else v for v in tags.to_pylist()],
+                    dtype=str)
 
 
 def _char_matrix(tags) -> np.ndarray | None:
