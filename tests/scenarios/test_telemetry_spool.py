@@ -23,11 +23,11 @@ from hypothesis import strategies as st
 
 from scenarios.config.loader import load_scenario
 from scenarios.files.rundir import RunDirError
-from scenarios.files.spool import blocks, select, times
+from scenarios.files.spool import blocks, disk, select, times
 from scenarios.files.telemetry_reader import tag_ns
 from scenarios.files.telemetry_source import open_source, whole_source
 
-ROWS = 1200                 # rows of the run kept: 10 min at 0.512 s
+ROWS = 500                  # rows of the run kept: 4 min at 0.512 s
 EPOCH_NS = np.datetime64("2026-03-20T12:00:00", "ns")
 
 
@@ -44,7 +44,7 @@ def base(run6):
 @pytest.fixture(scope="module")
 def scenario(run6):
     # A shorter max gap, so that the holes below are listed in the stats' gaps.
-    return load_scenario(run6 / "scenario.yaml", ["estimator.max_gap_s=20"])
+    return load_scenario(run6 / "scenario.yaml", ["estimator.max_gap_s=10"])
 
 
 def _write(path: Path, comment: str, header: list[str], rows: list[list[str]],
@@ -121,11 +121,14 @@ def clean(base, tmp: Path) -> Path:
 
 def holes(base, tmp: Path) -> Path:
     """On the grid with steps missing: single rows, a run of rows, every other row
-    for a while (a 1.024 s stretch) and a 25 s hole."""
+    for a while (a 1.024 s stretch) and a 13 s hole; and two rows on one grid step
+    (1 ms apart, within the grid's tolerance: the later one is the sample)."""
     comment, header, rows = base
-    gone = {3, 7, 8, 400, *range(100, 149), *range(600, 700, 2)}
-    return _write(tmp / "holes.csv", comment, header,
-                  [list(r) for i, r in enumerate(rows) if i not in gone])
+    gone = {3, 7, 8, 200, *range(50, 75), *range(300, 340, 2)}
+    kept = [list(r) for i, r in enumerate(rows) if i not in gone]
+    again = list(kept[381])
+    again[0] = repr(float(kept[380][0]) + 0.001)
+    return _write(tmp / "holes.csv", comment, header, kept[:381] + [again] + kept[381:])
 
 
 def jittered(base, tmp: Path, iso_only: bool = False) -> Path:
@@ -133,7 +136,7 @@ def jittered(base, tmp: Path, iso_only: bool = False) -> Path:
     tags written as ISO UTC alone when ``iso_only``."""
     comment, header, rows = base
     rng = np.random.default_rng(44)
-    rows = [list(r) for i, r in enumerate(rows) if i % 9 != 4 and not 700 <= i < 760]
+    rows = [list(r) for i, r in enumerate(rows) if i % 9 != 4 and not 300 <= i < 330]
     t = np.array([float(r[0]) for r in rows]) + rng.uniform(-0.05, 0.05, len(rows))
     t[0] = 0.0
     for r, v, tag in zip(rows, t, _tags(t), strict=True):
@@ -165,12 +168,12 @@ def spiked(base, tmp: Path) -> Path:
     _set(header, rows, 20, "pitch_deg", "nan")
     _set(header, rows, 21, "yaw_deg", "NaN")
     _set(header, rows, 22, "wheel2_rpm", "-inf")
-    _set(header, rows, 500, "wheel2_rpm", "1e308")
-    _set(header, rows, 501, "yaw_sigma_deg", "0.0")
-    _set(header, rows, 502, "sun_head", "")
+    _set(header, rows, 200, "wheel2_rpm", "1e308")
+    _set(header, rows, 201, "yaw_sigma_deg", "0.0")
+    _set(header, rows, 202, "sun_head", "")
     lit = next(c for c in ("dss_alpha_deg", "cass1_alpha_deg", "cass2_alpha_deg")
-               if rows[505][header.index(c)])
-    _set(header, rows, 505, lit, "120.0")
+               if rows[205][header.index(c)])
+    _set(header, rows, 205, lit, "120.0")
     _set(header, rows, 30, "roll_deg", "")      # a dropout between jump readings
     _set(header, rows, 31, "roll_deg", "")
     return _write(tmp / "spiked.csv", comment, header, rows, newline="\r\n")
@@ -196,7 +199,7 @@ def parquet(base, tmp: Path, timestamps: bool) -> Path:
             cols[name] = pa.array([float(x) if x else None for x in text], pa.float64())
     table = pa.table(cols).replace_schema_metadata({"epoch_utc": comment.split(": ")[1].strip()})
     path = tmp / f"spiked{'_ts' * timestamps}.parquet"
-    pq.write_table(table, path, row_group_size=500)
+    pq.write_table(table, path, row_group_size=200)
     return path
 
 
@@ -213,9 +216,22 @@ def files(base, tmp_path_factory):
 
 # --------------------------------------------------------------------------- equivalence
 
-@pytest.mark.parametrize("name", list(FILES))
-@pytest.mark.parametrize("block_rows", [1, 7, None])
-def test_every_answer_is_the_whole_reads(files, scenario, tmp_path, name, block_rows):
+@pytest.fixture
+def short_sweeps(monkeypatch):
+    """The scratch columns swept 5 rows at a time (the grid's spreading, the median,
+    the stats), so that their chunk boundaries fall inside these short files."""
+    monkeypatch.setattr(disk, "READ_ROWS", 5)
+
+
+# Blocks of one row for the files whose edits sit on every kind of boundary; 7 rows
+# and whole for all.
+CASES = [(name, rows) for name in FILES for rows in (7, None)] + \
+    [(name, 1) for name in ("holes", "jittered_iso", "spiked")]
+
+
+@pytest.mark.parametrize(("name", "block_rows"), CASES)
+def test_every_answer_is_the_whole_reads(files, scenario, tmp_path, name, block_rows,
+                                         short_sweeps):
     assert_same(files[name], scenario, block_rows, tmp_path)
 
 
@@ -239,7 +255,7 @@ def test_the_edits_are_screened(files, scenario, tmp_path):
 
 
 @pytest.mark.parametrize("timestamps", [False, True])
-@pytest.mark.parametrize("block_rows", [7, 333, None])
+@pytest.mark.parametrize("block_rows", [7, 133, None])
 def test_parquet(base, scenario, tmp_path, timestamps, block_rows):
     path = parquet(base, tmp_path, timestamps)
     (tmp_path / "scratch").mkdir()
@@ -251,7 +267,7 @@ def test_parquet(base, scenario, tmp_path, timestamps, block_rows):
 def _bad(base, tmp: Path, what: str) -> Path:
     comment, header, rows = base
     rows = [list(r) for r in rows]
-    late = ROWS - 40
+    late = ROWS - 30
     if what == "decreasing":
         # The tags stop increasing late in the file (the issue's day 20, in small).
         rows[late][0], rows[late + 1][0] = rows[late + 1][0], rows[late][0]
@@ -281,8 +297,11 @@ BAD = ("decreasing", "non-finite tag", "bad iso tag", "empty and zoned tags", "s
        "ragged row", "wheel end", "units")
 
 
-@pytest.mark.parametrize("what", BAD)
-@pytest.mark.parametrize("block_rows", [7, None])
+BAD_CASES = [(what, rows) for what in BAD for rows in (7, None)] + \
+    [(what, 1) for what in ("decreasing", "empty and zoned tags", "ragged row")]
+
+
+@pytest.mark.parametrize(("what", "block_rows"), BAD_CASES)
 def test_bad_files_get_the_whole_reads_message(base, scenario, tmp_path, what, block_rows):
     path = _bad(base, tmp_path, what)
     with pytest.raises(RunDirError) as whole:

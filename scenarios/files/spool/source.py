@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..telemetry_file import cadence_note
-from .disk import READ_ROWS, Columns
+from . import disk
+from .disk import Columns
 from .reader import Pass
 from .select import median
 
@@ -97,7 +98,7 @@ class SpoolSource:
         for _, t in cols.sweep("t_s", overlap=1 if dedupe else 0):
             k = np.rint((t - self.t0) / self.dt)
             if dedupe:
-                body = min(len(t), READ_ROWS)
+                body = min(len(t), disk.READ_ROWS)
                 keep = np.r_[k[1:] != k[:-1], True][:body]
                 t, k = t[:body][keep], k[:body][keep]
             yield t, k
