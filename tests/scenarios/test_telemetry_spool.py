@@ -126,9 +126,12 @@ def holes(base, tmp: Path) -> Path:
     comment, header, rows = base
     gone = {3, 7, 8, 200, *range(50, 75), *range(300, 340, 2)}
     kept = [list(r) for i, r in enumerate(rows) if i not in gone]
-    again = list(kept[381])
-    again[0] = repr(float(kept[380][0]) + 0.001)
-    return _write(tmp / "holes.csv", comment, header, kept[:381] + [again] + kept[381:])
+    # The repeated step just before the 13 s hole, whose start the stats list.
+    k = kept.index(list(rows[49]))
+    again = list(kept[k])
+    again[0] = repr(float(kept[k][0]) + 0.001)
+    again[1] = "0.03"
+    return _write(tmp / "holes.csv", comment, header, kept[:k + 1] + [again] + kept[k + 1:])
 
 
 def jittered(base, tmp: Path, iso_only: bool = False) -> Path:
@@ -155,7 +158,9 @@ def iso_only(base, tmp: Path) -> Path:
 def spiked(base, tmp: Path) -> Path:
     """Values the screen takes out, next to 7-row block edges and at the file's ends:
     wheel jumps (rows 6, 7, 13, 14), the first wheel1 reading out of range and the
-    last wheel2 reading a jump (both held from the nearest good one), a roll jump,
+    last wheel2 reading a jump (both held from the nearest good one), the last two
+    roll readings and the first two pitch readings jumps (judged in the file's last
+    and first full windows),
     ``nan``/``inf`` text, an out-of-range wheel, a Sun angle outside its head's field of view,
     a yaw σ of 0 (its yaw goes with it) and a sun_head left empty."""
     comment, header, rows = base
@@ -164,7 +169,10 @@ def spiked(base, tmp: Path) -> Path:
         _set(header, rows, k, "wheel1_rpm", "6500.0")
     _set(header, rows, 0, "wheel1_rpm", "99999.0")
     _set(header, rows, ROWS - 1, "wheel2_rpm", "4000.5")
-    _set(header, rows, ROWS - 3, "roll_deg", "5.0")
+    _set(header, rows, ROWS - 2, "roll_deg", "5.0")
+    _set(header, rows, ROWS - 1, "roll_deg", "5.0")
+    _set(header, rows, 0, "pitch_deg", "-5.0")
+    _set(header, rows, 1, "pitch_deg", "-5.0")
     _set(header, rows, 20, "pitch_deg", "nan")
     _set(header, rows, 21, "yaw_deg", "NaN")
     _set(header, rows, 22, "wheel2_rpm", "-inf")
@@ -252,6 +260,8 @@ def test_the_edits_are_screened(files, scenario, tmp_path):
     assert [(h["column"], h["row"]) for h in summary["held_at_ends"]] == \
         [("wheel1_rpm", 2), ("wheel2_rpm", ROWS + 1)]
     assert summary["columns"]["wheel1_rpm"]["reasons"]["jump"]["first_rows"] == [8, 9, 15, 16]
+    assert summary["columns"]["roll_deg"]["reasons"]["jump"]["first_rows"] == [ROWS, ROWS + 1]
+    assert summary["columns"]["pitch_deg"]["reasons"]["jump"]["first_rows"] == [2, 3]
 
 
 @pytest.mark.parametrize("timestamps", [False, True])
@@ -311,6 +321,57 @@ def test_bad_files_get_the_whole_reads_message(base, scenario, tmp_path, what, b
         open_source(path, scenario, tmp_path / "scratch", block_rows)
     assert str(streamed.value) == str(whole.value)
     assert list((tmp_path / "scratch").iterdir()) == []
+
+
+def test_a_parquet_file_without_a_tag(base, scenario, tmp_path):
+    """A null timestamp late in a Parquet file: read_parquet's line, its row."""
+    pa = pytest.importorskip("pyarrow")
+    pq = pytest.importorskip("pyarrow.parquet")
+    table = pq.read_table(parquet(base, tmp_path, timestamps=True))
+    tags = table.column("time_utc").to_pylist()
+    tags[ROWS - 30] = None
+    table = table.set_column(table.schema.get_field_index("time_utc"), "time_utc",
+                             pa.array(tags, table.schema.field("time_utc").type))
+    path = tmp_path / "no_tag.parquet"
+    pq.write_table(table, path, row_group_size=200)
+    with pytest.raises(RunDirError) as whole:
+        whole_source(path, scenario)
+    for block_rows in (7, None):
+        with pytest.raises(RunDirError) as streamed:
+            open_source(path, scenario, tmp_path, block_rows)
+        assert str(streamed.value) == str(whole.value)
+
+
+def test_units_are_judged_on_the_first_two_days(base, scenario, tmp_path):
+    """A 3-day file (a row every 64 s, on the grid) whose wheel1 is in rad/s for two
+    days and in rpm after: the streamed read's unit line is the whole read's of the
+    file cut after two days (the medians of those rows), not of the whole file's.
+    The two-day rows alternate 560 and 590 rad/s, an odd count of them: without its
+    last row, the median would be 575."""
+    comment, header, rows = base
+    j = header.index("wheel1_rpm")
+    three = []
+    for i in range(3 * 1350 + 1):
+        r = list(rows[i % ROWS])
+        r[0], r[-1] = repr(64.0 * i), _tags(np.array([64.0 * i]))[0]
+        if 64.0 * i <= 2 * 86400:
+            r[j] = ("560.0", "590.0")[i % 2]
+        three.append(r)
+    full = _write(tmp_path / "three_days.csv", comment, header, three)
+    cut = _write(tmp_path / "two_days.csv", comment, header, three[:2701])
+
+    def unit_line(path, read):
+        with pytest.raises(RunDirError) as exc:
+            read(path)
+        return [x.replace(str(path), "FILE") for x in str(exc.value).splitlines()
+                if "wheel1_rpm reads" in x]
+    expected = unit_line(cut, lambda p: whole_source(p, scenario))
+    assert expected and "median 560" in expected[0]
+    for block_rows in (7, None):
+        (tmp_path / "scratch").mkdir(exist_ok=True)
+        assert unit_line(full, lambda p, b=block_rows: open_source(
+            p, scenario, tmp_path / "scratch", b)) == expected
+    assert unit_line(full, lambda p: whole_source(p, scenario)) != expected
 
 
 # --------------------------------------------------------------------------- parts
