@@ -30,7 +30,7 @@ from ..telemetry_reader import NS_PER
 
 CHUNK_CHARS = 4 << 20       # text read per block: ~38 k telemetry rows (a larger block is
                             # no faster, and malloc keeps more of it)
-PARQUET_BATCH = 1 << 18
+PARQUET_BATCH = 1 << 16      # rows per Parquet batch
 
 
 @dataclass(frozen=True)

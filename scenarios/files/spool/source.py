@@ -175,6 +175,12 @@ class SpoolSource:
     def close(self) -> None:
         shutil.rmtree(self.folder, ignore_errors=True)
 
+    def __enter__(self) -> SpoolSource:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
 
 def open_spool(path, s, folder, block_rows: int | None = None) -> SpoolSource:
     """``telemetry_source.open_source``, read in blocks: every problem raised
