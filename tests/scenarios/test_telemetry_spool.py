@@ -377,8 +377,7 @@ def test_units_are_judged_on_the_first_two_days(base, scenario, tmp_path):
 # --------------------------------------------------------------------------- parts
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.floats(allow_nan=False, allow_infinity=False, width=64), min_size=1,
-                max_size=60), st.integers(1, 9))
+@given(st.lists(st.floats(-1e300, 1e300), min_size=1, max_size=60), st.integers(1, 9))
 def test_select_median_is_numpys(values, parts):
     x = np.array(values)
     chunks = np.array_split(x, parts)
