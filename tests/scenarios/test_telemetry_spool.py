@@ -250,6 +250,26 @@ def test_any_block_size(files, scenario, tmp_path_factory, block_rows, name):
     assert_same(files[name], scenario, block_rows, tmp_path_factory.mktemp("spool"))
 
 
+@pytest.mark.parametrize("how", ["crlf", "cr", "no final newline", "blank lines"])
+def test_line_ends(base, scenario, tmp_path, how):
+    """Lines ended as other systems end them, read as Python's text mode reads them."""
+    path = clean(base, tmp_path)
+    text = path.read_text()
+    if how == "crlf":
+        text = text.replace("\n", "\r\n")
+    elif how == "cr":
+        text = text.replace("\n", "\r")
+    elif how == "no final newline":
+        text = text.rstrip("\n")
+    else:
+        lines = text.split("\n")
+        text = "\n".join(lines[:100] + ["", ""] + lines[100:]) + "\n\n"
+    path.write_text(text, newline="")
+    (tmp_path / "scratch").mkdir()
+    for block_rows in (7, None):
+        assert_same(path, scenario, block_rows, tmp_path / "scratch")
+
+
 def test_the_edits_are_screened(files, scenario, tmp_path):
     """The spiked file exercises what it is meant to: every rule, and both held ends."""
     src = open_source(files["spiked"], scenario, tmp_path, 7)
@@ -296,6 +316,17 @@ def _bad(base, tmp: Path, what: str) -> Path:
         rows[late] = rows[late][:-2]
     elif what == "wheel end":
         rows[-1][header.index("wheel2_rpm")] = ""
+    elif what == "text cell":
+        rows[late][1] = "1.5x"
+    elif what == "space line":
+        rows[late] = ["   "]
+    elif what == "nan tag":
+        rows[late][-1] = "nan"
+    elif what == "not utf-8":
+        path = _write(tmp / "not_utf8.csv", comment, header, rows)
+        data = path.read_bytes()
+        path.write_bytes(data[:-2000] + b"\xff" + data[-2000:])
+        return path
     elif what == "units":
         j = header.index("wheel1_rpm")
         for r in rows:
@@ -304,7 +335,7 @@ def _bad(base, tmp: Path, what: str) -> Path:
 
 
 BAD = ("decreasing", "non-finite tag", "bad iso tag", "empty and zoned tags", "sun head",
-       "ragged row", "wheel end", "units")
+       "ragged row", "wheel end", "units", "text cell", "space line", "nan tag", "not utf-8")
 
 
 BAD_CASES = [(what, rows) for what in BAD for rows in (7, None)] + \
