@@ -134,6 +134,17 @@ def holes(base, tmp: Path) -> Path:
     return _write(tmp / "holes.csv", comment, header, kept[:k + 1] + [again] + kept[k + 1:])
 
 
+def repeat_and_hole(base, tmp: Path) -> Path:
+    """A row missing and, later, two rows on one grid step: as many rows as grid
+    steps, which ``on_grid`` takes as they are (every row a sample, none missing)."""
+    comment, header, rows = base
+    kept = [list(r) for i, r in enumerate(rows) if i != 10]
+    again = list(kept[300])
+    again[0] = repr(float(kept[299][0]) + 0.002)
+    return _write(tmp / "repeat_and_hole.csv", comment, header,
+                  kept[:300] + [again] + kept[300:])
+
+
 def jittered(base, tmp: Path, iso_only: bool = False) -> Path:
     """Off the grid: ±50 ms on every tag, some rows dropped (dropouts), with the
     tags written as ISO UTC alone when ``iso_only``."""
@@ -211,7 +222,8 @@ def parquet(base, tmp: Path, timestamps: bool) -> Path:
     return path
 
 
-FILES = {"clean": clean, "holes": holes, "jittered": jittered,
+FILES = {"clean": clean, "holes": holes, "repeat_and_hole": repeat_and_hole,
+         "jittered": jittered,
          "jittered_iso": lambda b, t: jittered(b, t, iso_only=True), "iso": iso_only,
          "spiked": spiked}
 

@@ -2,14 +2,17 @@
 whole read (``telemetry_reader.read_table``) holds for its rows, and each problem its
 one line, with the file's row numbers.
 
-CSV: line-aligned text chunks (~32 MB, or ``block_rows`` lines), each parsed as
+CSV: line-aligned chunks (4 MB, or ``block_rows`` lines), each parsed as
 ``csvio.read_csv`` parses the whole body: by ``csvio._parse_body`` (NumPy's loadtxt,
 CPython's correctly rounded ``PyOS_string_to_double``), or, when pyarrow is installed
 and gives the same doubles as loadtxt on a table of hard cases (``arrow_agrees``), by
-pyarrow's CSV reader, ten times faster; a chunk arrow refuses is parsed by loadtxt,
-whose error is the whole read's.  Cells written ``nan`` or ``inf`` are marked as
-``csvio.non_number_cells`` marks them.  Parquet: ``ParquetFile.iter_batches``, each
-batch converted as ``telemetry_reader.read_parquet`` converts the whole table.
+pyarrow's CSV reader, about six times faster; a chunk arrow refuses is parsed by
+loadtxt, whose error is the whole read's.  One known difference: a file with a row one
+field short and another one field long passes the whole read's count of commas (and is
+read, misaligned) but not a block's, unless both rows fall in one block.  Cells
+written ``nan`` or ``inf`` are marked as ``csvio.non_number_cells`` marks them.
+Parquet: ``ParquetFile.iter_batches``, each batch converted as
+``telemetry_reader.read_parquet`` converts the whole table.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from ..telemetry_reader import NS_PER
 
 CHUNK_CHARS = 4 << 20       # text read per block: ~38 k telemetry rows (a larger block is
                             # no faster, and malloc keeps more of it)
-PARQUET_BATCH = 1 << 16      # rows per Parquet batch
+PARQUET_BATCH = 1 << 16     # rows per Parquet batch
 
 
 @dataclass(frozen=True)

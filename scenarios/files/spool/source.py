@@ -37,10 +37,13 @@ class SpoolSource:
         self.dt = p.dt
         self.t0 = p.t0
         self.regular = not p.off_grid
-        self.repeats = p.repeats
-        self.present = p.present if self.regular else self.n_rows
-        self.cadence = p.cadence_steps()
         self.n = p.last_k + 1 if self.regular else self.n_rows
+        # As many rows as grid steps: on_grid takes the rows as they are, each row
+        # the sample of its index (even when a repeated step makes up for a hole).
+        self.as_rows = self.n == self.n_rows
+        self.repeats = 0 if self.as_rows else p.repeats
+        self.present = self.n_rows if self.as_rows else p.present
+        self.cadence = 1 if self.as_rows else p.cadence_steps()
         self.samples = self.rows if self.n == self.n_rows else self._spread()
         self._median: float | None = None
         self._stats: dict[float, dict] = {}
@@ -95,8 +98,9 @@ class SpoolSource:
         """(t, k) of the samples a chunk at a time (``present``: on the grid, only the
         last row of each grid step, the rows ``stats`` sees; k: the grid step)."""
         dedupe = present and self.regular and self.repeats
-        for _, t in cols.sweep("t_s", overlap=1 if dedupe else 0):
-            k = np.rint((t - self.t0) / self.dt)
+        for a, t in cols.sweep("t_s", overlap=1 if dedupe else 0):
+            k = (np.arange(a, a + len(t), dtype=float) if self.as_rows
+                 else np.rint((t - self.t0) / self.dt))
             if dedupe:
                 body = min(len(t), disk.READ_ROWS)
                 keep = np.r_[k[1:] != k[:-1], True][:body]

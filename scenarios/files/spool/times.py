@@ -3,7 +3,7 @@ file, its problems found across blocks and told in its order, with its row numbe
 
 The ISO 8601 tags of a block all written alike (``2026-03-20T12:00:00.512Z``, the
 layout telemetry.csv writes) are read by integer arithmetic on their characters,
-about 30 times faster than NumPy's parser and to the same nanosecond
+about 15 times faster than NumPy's parser and to the same nanosecond
 (``fixed_layout_ns``; tests/scenarios/test_telemetry_spool.py checks it against
 ``tag_ns``); any other block goes through ``tag_ns`` itself.
 """
