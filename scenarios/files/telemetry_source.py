@@ -91,7 +91,15 @@ def open_source(path, s, folder, block_rows: int | None = None) -> TelemetrySour
     """The telemetry file ``path`` as the scenario ``s`` reads it, every problem
     reported (``RunDirError``, one line each) before this returns, so before a caller
     writes anything.  ``folder``: where a streamed reader keeps its scratch files (the
-    caller's stage); ``block_rows``: its block size (a test hook)."""
+    caller's stage); ``block_rows``: its block size (a test hook).  The file is read in
+    blocks into raw scratch columns there (``spool``): a block in memory at a time,
+    every answer ``WholeSource``'s on the same file."""
+    from .spool.source import open_spool
+    return open_spool(path, s, folder, block_rows)
+
+
+def whole_source(path, s) -> WholeSource:
+    """The file read whole (``read_screened`` + ``on_grid``): the reference."""
     from .telemetry_file import on_grid, read_screened
     cols, report = read_screened(path, s)
     return WholeSource(on_grid(cols, s.sample_interval_s, s.estimator.max_gap_s, path, report))
