@@ -80,7 +80,7 @@ def estimate_into(s: Scenario, telemetry: Path, truth: Path | None, stage: Path,
     from .run.stream.file_run import estimate_stream
     if window_samples is None and os.environ.get(WINDOW_SAMPLES_ENV):
         window_samples = int(os.environ[WINDOW_SAMPLES_ENV])
-    source = open_source(telemetry, s, Path(stage) / ".telemetry")
+    source = open_source(telemetry, s, Path(stage))
     try:
         return estimate_stream(s, source, stage, sources, window_samples, truth_path=truth)
     finally:
