@@ -137,14 +137,20 @@ class SmoothedView(SmootherResult):
 
 def head(result: FilterResult, n: int) -> FilterResult:
     """The first ``n`` samples of a filter history (the prior after them is not kept)."""
+    return stretch(result, slice(0, n))
+
+
+def stretch(result: FilterResult, rows: slice) -> FilterResult:
+    """Samples ``rows`` of a filter history (the prior after the whole is kept, but
+    means nothing for a stretch that ends before it)."""
     if isinstance(result, BiasedResult):
         a = result.augmented
-        cut = AugmentedResult(a.x[:n], a.P_packed[:n], a.innovations[:n],
-                              a.innovation_var[:n], a.rejected[:n], a.x_next, a.P_next,
+        cut = AugmentedResult(a.x[rows], a.P_packed[rows], a.innovations[rows],
+                              a.innovation_var[rows], a.rejected[rows], a.x_next, a.P_next,
                               a.backend, a.names)
         return _view(cut)
-    return FilterResult(result.x[:n], result.P_packed[:n], result.innovations[:n],
-                        result.innovation_var[:n], result.x_next, result.P_next,
+    return FilterResult(result.x[rows], result.P_packed[rows], result.innovations[rows],
+                        result.innovation_var[rows], result.x_next, result.P_next,
                         result.backend)
 
 

@@ -31,6 +31,7 @@ from ..filtering import (
     paper_smoother,
     smoothed_full_P,
     smoothed_full_x,
+    stretch,
 )
 from ..pitch import PitchHistory, PitchStream, history_at
 
@@ -152,6 +153,37 @@ def _lighten(f: Filtered, smoothed_x: np.ndarray | None,
                     filters, f.pitch, smoothed_sigma, f.pitch_rows)
 
 
+# A smoothed covariance is formed this many samples at a time, backwards, each
+# stretch continuing from the smoothed x and P where the later one begins: the same
+# steps as one pass, so the same bits, without a window's whole P history twice.
+SMOOTH_PIECE = 16_384
+
+
+def smooth_pieces(design, result, disc, u, extra, covariance: bool, after: dict,
+                  piece: int = SMOOTH_PIECE):
+    """``paper_smoother`` of a history with the smoothed (full) x and P after it
+    (``after``: ``x_after``, ``P_after``; empty at the run's end): the smoothed x and,
+    with ``covariance``, 1σ (the paper's nine states), and the smoothed full x and P
+    at its first sample.  Without ``covariance``, in one pass as `run` smooths."""
+    n = len(result.x)
+    if not covariance:
+        r = paper_smoother(design, result, disc, u=u, extra=extra, covariance=False,
+                           **after)
+        return r.x, None, {"x_after": smoothed_full_x(r)[0]}
+    x, sigma = np.empty((n, 9)), np.empty((n, 9))
+    for b in range(n, 0, -piece):
+        a = max(0, b - piece)
+        rows = slice(a, b)
+        d = disc.cut(rows) if isinstance(disc, StepTable) else disc
+        r = paper_smoother(design, stretch(result, rows), d, u=u[rows], covariance=True,
+                           extra=None if extra is None else ExtraNoise(extra.scale[rows],
+                                                                       extra.Qd_unit),
+                           **after)
+        x[rows], sigma[rows] = r.x, r.sigma
+        after = {"x_after": smoothed_full_x(r)[0], "P_after": smoothed_full_P(r)[0]}
+    return x, sigma, after
+
+
 def smoothed(s: Scenario, records, smooth: bool = True, covariance: bool = False):
     """The RTS smoother over each window and ``plan.overlap`` samples of the next
     (one window: the whole run, exactly ``rts_smoother``).  ``covariance``: with the
@@ -172,17 +204,11 @@ def smoothed(s: Scenario, records, smooth: bool = True, covariance: bool = False
                 m = min(plan.overlap, len(nxt.window.t_s))
                 d = nxt.disc if not isinstance(nxt.disc, StepTable) else \
                     nxt.disc.cut(slice(0, m))
-                o = paper_smoother(
-                    design, head(nxt.real, m), d, u=nxt.u[:m], covariance=covariance,
-                    extra=None if nxt.extra is None else ExtraNoise(nxt.extra.scale[:m],
-                                                                    nxt.extra.Qd_unit))
-                after = {"x_after": smoothed_full_x(o)[0]}
-                if covariance:
-                    after["P_after"] = smoothed_full_P(o)[0]
-            r = paper_smoother(design, cur.real, cur.disc, u=cur.u, extra=cur.extra,
-                               covariance=covariance, **after)
-            x = r.x
-            if covariance:
-                sigma = r.sigma
+                extra = None if nxt.extra is None else ExtraNoise(nxt.extra.scale[:m],
+                                                                  nxt.extra.Qd_unit)
+                _, _, after = smooth_pieces(design, head(nxt.real, m), d, nxt.u[:m], extra,
+                                            covariance, {})
+            x, sigma, _ = smooth_pieces(design, cur.real, cur.disc, cur.u, cur.extra,
+                                        covariance, after)
         yield _lighten(cur, x, sigma)
         cur = nxt
