@@ -47,6 +47,23 @@ def _pitch_at(w: Window, k, pick) -> PitchRows | None:
                      None if p.nees is None else p.nees[pick])
 
 
+FILL_ROWS = 1 << 16
+
+
+def _filled(path: Path, dtype, shape: tuple, fill) -> None:
+    """A .npy file of ``shape`` holding ``fill``, written a block at a time: filling
+    a mapping of it would hold every page of the file at once (a month at every
+    sample is hundreds of MB per key)."""
+    m = np.lib.format.open_memmap(path, mode="w+", dtype=dtype, shape=shape)
+    offset = m.offset
+    del m
+    row = np.full((min(FILL_ROWS, shape[0]), *shape[1:]), fill, dtype=dtype)
+    with open(path, "r+b") as f:
+        f.seek(offset)
+        for a in range(0, shape[0], FILL_ROWS):
+            f.write(row[:min(FILL_ROWS, shape[0] - a)].tobytes())
+
+
 class ComparisonRows:
     def __init__(self, folder: Path, n_samples: int, stride: int):
         self.folder = Path(folder)
@@ -61,11 +78,9 @@ class ComparisonRows:
         every page the run ever wrote)."""
         path = self.folder / f"{key}.npy"
         if key not in self.maps:
-            m = np.lib.format.open_memmap(path, mode="w+", dtype=dtype,
-                                          shape=(self.n_rows, *shape))
-            m[...] = fill
+            _filled(path, dtype, (self.n_rows, *shape), fill)
             self.maps[key] = True
-        elif not isinstance(self.maps[key], np.memmap):
+        if not isinstance(self.maps[key], np.memmap):
             m = np.load(path, mmap_mode="r+")
         else:
             return self.maps[key]
