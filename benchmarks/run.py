@@ -233,6 +233,33 @@ def page_30day_figures() -> list[tuple[str, float, str]]:
             ("export_30day_peak_rss_MB", export_mb, "MB")]
 
 
+def batch_30day_figures() -> list[tuple[str, float, str]]:
+    """Issue 44: `dynprop batch --span-h 24` on the cached 30-day run, with its
+    truth.csv (the run directory) and without (the telemetry file with --scenario), and
+    `dynprop trim` on it: the first's wall time and each command's peak memory of the
+    whole process tree (``_watched``: the summed PSS or the largest RSS, whichever is
+    more; target ≤ 1 GB; before issue 44, 9.0 GB and 5.3 GB)."""
+    run = _thirty_day_run()
+    with tempfile.TemporaryDirectory() as tmp:
+        wall, total, largest = _watched([DYNPROP, "batch", str(run), "--span-h", "24",
+                                         "--out", f"{tmp}/b"], "the 30-day batch")
+        _, total_n, largest_n = _watched(
+            [DYNPROP, "batch", str(run / "telemetry.csv"), "--scenario",
+             str(run / "scenario.yaml"), "--span-h", "24", "--out", f"{tmp}/bn"],
+            "the 30-day batch without its truth")
+        # trim writes RUN_DIR/trim: a folder of links to the cached run's files.
+        linked = Path(tmp) / "run"
+        linked.mkdir()
+        for name in ("scenario.yaml", "telemetry.csv", "truth.csv", "estimate.csv",
+                     "summary.json"):
+            (linked / name).symlink_to(run / name)
+        _, trim_total, trim_largest = _watched([DYNPROP, "trim", str(linked)],
+                                               "the 30-day trim")
+    return [("batch_30day_s", wall, "s"),
+            ("batch_30day_peak_rss_MB", max(total, largest, total_n, largest_n), "MB"),
+            ("trim_30day_peak_rss_MB", max(trim_total, trim_largest), "MB")]
+
+
 def _exported(run: Path) -> str:
     """``estimate`` when the run's estimate.csv has pitch_deg (a year's run made before
     the pitch filter has none), else ``truth``."""
@@ -425,7 +452,8 @@ def main() -> None:
         for name in only:
             name = {"export": "export_figures"}.get(name, name)   # `make bench BENCH=export`
             if name in ("tune_figures", "batch_figures", "report_figures", "export_figures",
-                        "estimate_figures", "page_30day_figures", "tune_30day_figures"):
+                        "estimate_figures", "page_30day_figures", "tune_30day_figures",
+                        "batch_30day_figures", "real_30day_figures"):
                 for key, value, unit in globals()[name]():
                     report(key, value, unit)
                 continue
@@ -503,6 +531,8 @@ def main() -> None:
         report(key, value, unit)
     year_dir.cleanup()
     for key, value, unit in page_30day_figures():
+        report(key, value, unit)
+    for key, value, unit in batch_30day_figures():
         report(key, value, unit)
     # The plain-numpy loop, for comparison, scaled to a day: the tests' textbook
     # reference (tests/estimator/dense_reference.py), one Python iteration per step.

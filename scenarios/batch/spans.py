@@ -16,7 +16,7 @@ own.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from dynprop.estimator.batch.linear import (
@@ -37,6 +37,7 @@ from ..bridge.inputs import initial_prior
 from ..config import build
 from ..config.schema import Scenario
 from ..records import Measured
+from ..units import RAD2DEG
 
 PAPER_MIN_SPAN_H = 8.0   # Section 5: "at least one-third of an orbit, or 8 hours"
 
@@ -112,20 +113,23 @@ def _cut_nonlinear(d: NonlinearData, span: Span) -> NonlinearData:
 
 @dataclass(frozen=True)
 class BatchRun:
-    """Every batch of a record and the joined history: x at every sample (NaN where
-    the owning batch did not converge), the owner of each sample, and at ``rows``
-    (global sample indices) the covariance with and without the consider parameters."""
+    """Every batch of a record and the joined history at ``rows`` (global sample
+    indices): x (NaN where the owning batch did not converge), the owner of each
+    row, and the covariance with and without the consider parameters; and each
+    batch's overlap comparison with the one before (``overlap``).  The solutions keep
+    their epoch figures only (their histories are read into these as each is solved)."""
 
     scenario: Scenario
     model: str
     spans: list[Span]
     solutions: list[BatchSolution]
     priors: list[str]          # where each batch's a priori came from
-    x: np.ndarray
-    owner: np.ndarray
+    x_rows: np.ndarray
+    owner_rows: np.ndarray
     rows: np.ndarray
     P_rows: np.ndarray
     P_consider_rows: np.ndarray
+    overlaps: list[dict | None]
 
     @property
     def sigma_rows(self) -> np.ndarray:
@@ -138,15 +142,7 @@ class BatchRun:
         return np.sqrt(np.diagonal(self.P_consider_rows, axis1=1, axis2=2))
 
 
-def solve_spans(s: Scenario, tel: Measured, pitch_rad, rows=(), t_s=None,
-                model: str | None = None, span_h: float | None = None,
-                overlap_h: float | None = None, on_grid: bool = True) -> BatchRun:
-    """Every batch of the telemetry ``tel`` (SI, at times ``t_s``; on the scenario's
-    grid unless ``on_grid`` is False), by ``batch``'s settings unless given."""
-    cfg = s.batch
-    model = model or cfg.model
-    span_h = cfg.span_h if span_h is None else span_h
-    overlap_h = cfg.overlap_h if overlap_h is None else overlap_h
+def _check_lengths(span_h: float, overlap_h: float) -> None:
     # The command line checks its --span-h and --overlap-h; dynprop.batch() and other
     # callers come here directly (a NaN or infinite span made an IndexError).
     if not (np.isfinite(span_h) and span_h > 0):
@@ -157,50 +153,125 @@ def solve_spans(s: Scenario, tel: Measured, pitch_rad, rows=(), t_s=None,
     if overlap_h >= span_h:
         raise BatchError(f"batch.overlap_h: {overlap_h:g} h must be shorter than batch.span_h "
                          f"({span_h:g} h)")
+
+
+def solve_spans(s: Scenario, tel: Measured, pitch_rad, rows=(), t_s=None,
+                model: str | None = None, span_h: float | None = None,
+                overlap_h: float | None = None, on_grid: bool = True) -> BatchRun:
+    """Every batch of the telemetry ``tel`` (SI, at times ``t_s``; on the scenario's
+    grid unless ``on_grid`` is False), by ``batch``'s settings unless given: the
+    record's data formed whole and cut span by span (``batch.span_data`` forms each
+    span's from a file instead)."""
+    model = model or s.batch.model
     n = len(tel.roll_rad)
     t = np.asarray(t_s, dtype=float) if t_s is not None else s.sample_interval_s * np.arange(n)
     own_t = None if on_grid else t
+    whole = {}
+
+    def data_of(sp: Span) -> SpanData:
+        if not whole:
+            whole["lin"] = linear_data(s, tel, own_t)
+            whole["cases"] = linear_consider(s, tel, own_t) if model == "linear" else ()
+            whole["nl"] = (nonlinear_data(s, tel, pitch_rad, own_t) if model == "nonlinear"
+                           else None)
+        return cut_span(whole["lin"], whole["cases"], whole["nl"], sp)
+
+    return solve_chain(s, t, data_of, rows, model, span_h, overlap_h)
+
+
+@dataclass(frozen=True)
+class SpanData:
+    """What a batch fits: the paper model's data over the span and the sample past it,
+    the consider cases' (linear model), the nonlinear model's (or None)."""
+
+    linear: LinearData
+    cases: tuple
+    nonlinear: NonlinearData | None
+
+
+def cut_span(lin: LinearData, cases: tuple, nl: NonlinearData | None, sp: Span) -> SpanData:
+    """The span ``sp`` of data formed over more samples (``sp`` counted from their
+    first)."""
+    return SpanData(_cut_linear(lin, sp),
+                    tuple(type(c)(c.name, c.sigma, c.delta, _cut_linear(c.plus, sp),
+                                  _cut_linear(c.minus, sp)) for c in cases),
+                    None if nl is None else _cut_nonlinear(nl, sp))
+
+
+def _lengths(s: Scenario, span_h, overlap_h) -> tuple[float, float]:
+    return (s.batch.span_h if span_h is None else span_h,
+            s.batch.overlap_h if overlap_h is None else overlap_h)
+
+
+def _overlap(tail: np.ndarray | None, x: np.ndarray) -> dict | None:
+    """A batch against the one before where both fitted the samples (``tail``: the
+    earlier one's states there): the RMS and largest difference of their roll and
+    yaw, the overlap comparison of definitive solutions."""
+    if tail is None or not len(tail):
+        return None
+    d = (x[:len(tail)] - tail)[:, [0, 2]] * RAD2DEG
+    return {"samples": int(len(tail)),
+            "roll_rms_deg": float(np.sqrt(np.mean(d[:, 0] ** 2))),
+            "yaw_rms_deg": float(np.sqrt(np.mean(d[:, 1] ** 2))),
+            "roll_max_deg": float(np.max(np.abs(d[:, 0]))),
+            "yaw_max_deg": float(np.max(np.abs(d[:, 1])))}
+
+
+def _light(sol: BatchSolution) -> BatchSolution:
+    """A solution without its histories (read into the ``BatchRun`` already): empty
+    arrays of their own, not views, which would keep the span's history alive."""
+    empty = np.empty((0, N_STATES, N_STATES))
+    return replace(sol, x=np.empty((0, N_STATES)), P_rows=empty,
+                   P_consider_rows=None if sol.P_consider_rows is None else empty,
+                   S_rows=None)
+
+
+def solve_chain(s: Scenario, t: np.ndarray, data_of, rows=(), model: str | None = None,
+                span_h: float | None = None, overlap_h: float | None = None) -> BatchRun:
+    """Every batch of a record at times ``t``, in turn, ``data_of(span)`` giving each
+    one's ``SpanData``: only one span's data and solution are held at a time."""
+    cfg = s.batch
+    model = model or cfg.model
+    span_h, overlap_h = _lengths(s, span_h, overlap_h)
+    _check_lengths(span_h, overlap_h)
     spans = plan_spans(t, span_h, overlap_h)
     params, _ = build.estimator_model(s)
     x_bar, P_bar = initial_prior(s, params)
-    lin = linear_data(s, tel, own_t)
-    cases = linear_consider(s, tel, own_t) if model == "linear" else ()
-    nl = nonlinear_data(s, tel, pitch_rad, own_t) if model == "nonlinear" else None
     sigma_c = nonlinear_consider(s)
     rows = np.asarray(rows, dtype=np.int64)
-    owner = np.zeros(n, dtype=np.int64)
-    for sp in spans:
-        owner[sp.a:] = sp.index
-    x = np.full((n, N_STATES), np.nan)
+    # A sample belongs to the latest batch whose epoch is not after it.
+    owner_rows = np.searchsorted([sp.a for sp in spans], rows, side="right") - 1
+    x_rows = np.full((len(rows), N_STATES), np.nan)
     P_rows = np.full((len(rows), N_STATES, N_STATES), np.nan)
     Pc_rows = np.full_like(P_rows, np.nan)
-    solutions, priors = [], []
+    solutions, priors, overlaps = [], [], []
     prior, source = Prior(x_bar, P_bar), "the filter's prior (estimator.initial_sigma)"
     options = Options(cfg.max_iterations, cfg.tolerance_sigma)
+    tail = None       # the previous converged batch's states over this one's overlap
     for sp in spans:
         nxt = spans[sp.index + 1] if sp.index + 1 < len(spans) else None
-        mine = np.flatnonzero((rows >= sp.a) & (rows < sp.stop) & (owner[rows] == sp.index))
+        mine = np.flatnonzero((rows >= sp.a) & (rows < sp.stop) & (owner_rows == sp.index))
         local = rows[mine] - sp.a
         want = np.unique(np.r_[local, [nxt.a - sp.a] if nxt is not None else []]
                          ).astype(np.int64)
-        ld = _cut_linear(lin, sp)
-        cut_cases = tuple(type(c)(c.name, c.sigma, c.delta, _cut_linear(c.plus, sp),
-                                  _cut_linear(c.minus, sp)) for c in cases)
+        data = data_of(sp)
         if model == "linear":
-            sol = linear_batch(ld, prior, want, cut_cases)
+            sol = linear_batch(data.linear, prior, want, data.cases)
         else:   # from the linear batch's solution
-            sol = nonlinear_batch(_cut_nonlinear(nl, sp), prior, linear_start(ld, prior),
+            sol = nonlinear_batch(data.nonlinear, prior, linear_start(data.linear, prior),
                                   want, sigma_c, options)
-        solutions.append(sol)
-        priors.append(source)
-        hist = slice(sp.a, sp.stop)
-        mine_hist = owner[hist] == sp.index
+        del data
+        overlaps.append(_overlap(tail, sol.x) if sol.converged else None)
+        tail = (sol.x[nxt.a - sp.a:min(sp.b, nxt.b) - sp.a].copy()
+                if nxt is not None and sol.converged else None)
         if sol.converged:
-            x[hist][mine_hist] = sol.x[mine_hist]
+            x_rows[mine] = sol.x[local]
             at = np.searchsorted(want, local)
             P_rows[mine] = sol.P_rows[at]
             if sol.P_consider_rows is not None:
                 Pc_rows[mine] = sol.P_consider_rows[at]
+        solutions.append(_light(sol))
+        priors.append(source)
         if nxt is None:
             break
         if cfg.apriori == "chain" and sol.converged:
@@ -213,4 +284,5 @@ def solve_spans(s: Scenario, tel: Measured, pitch_rad, rows=(), t_s=None,
             prior = Prior(x_bar, P_bar)
             source = ("the filter's prior (estimator.initial_sigma)" if cfg.apriori != "chain"
                       else f"the filter's prior: batch {sp.index} did not converge")
-    return BatchRun(s, model, spans, solutions, priors, x, owner, rows, P_rows, Pc_rows)
+    return BatchRun(s, model, spans, solutions, priors, x_rows, owner_rows, rows, P_rows,
+                    Pc_rows, overlaps)

@@ -108,7 +108,7 @@ def one_case(case: str, k: int | None, spans_h: tuple[float, ...], extra=()) -> 
         jobs = [("nonlinear", h) for h in spans_h] + [("linear", LINEAR_SPAN_H)]
         for model, span_h in jobs:
             b = solve_spans(s, tel, pitch, rows, None, model, span_h, 0.0)
-            judged = compare(t, rows, truth, {"batch": (b.x[rows], b.sigma_rows)}, gaps,
+            judged = compare(t, rows, truth, {"batch": (b.x_rows, b.sigma_rows)}, gaps,
                              b.sigma_consider_rows)
             out[f"{model}_{span_h:g}h"] = batch_entry(b, judged["batch"])
         return head | {"status": "ok", "epoch_utc": flying.epoch_utc,

@@ -42,6 +42,17 @@ from ..bridge.inputs import filter_inputs, initial_prior, telemetry_inputs
 from ..config import build
 from ..config.estimation import QUARTER_ORBIT_S
 from ..config.schema import Scenario
+from ..run.windowed import (
+    DAYS,
+    ArraySource,
+    Windows,
+    cut_inputs,
+    pad_samples,
+    padded_range,
+    used_names,
+    wheel_names,
+    window_bounds,
+)
 from ..units import DAY_S, DEG
 
 ASSUMED_KNOWN = (
@@ -225,44 +236,87 @@ def estimate_kappa(s: Scenario, cols: dict[str, np.ndarray], batch: Batch,
     """κ̂ ± σ and the recommendation from the telemetry columns ``cols`` (telemetry.csv's
     names) over ``batch``: on the scenario's grid, or (``regular`` False) each sample at
     its own time, the filter stepping over each interval (``estimator.linear.steps``)
-    as `dynprop estimate`'s does; ``stride`` is then in the scenario's steps."""
+    as `dynprop estimate`'s does; ``stride`` is then in the scenario's steps.  The
+    columns are filtered whole (``kappa_from_source`` reads a file window by window)."""
+    return kappa_from_source(s, ArraySource(cols, regular), batch, stride,
+                             Windows(whole_s=np.inf))
+
+
+def kappa_from_source(s: Scenario, source, batch: Batch, stride: int = 125,
+                      windows: Windows = DAYS) -> TrimResult:
+    """``estimate_kappa`` of a ``files.telemetry_source.TelemetrySource`` (or an
+    ``ArraySource``), read and filtered window by window (``run.windowed``): the
+    filter carries its prior across each boundary and keeps its history only at the
+    figure's rows, so memory is a window's whatever the batch's length.  A batch of
+    up to two days is one window: the whole computation, bit for bit."""
     t_shape, shape, sunlit = solar_unit_torque(s, batch)
     problems = batch_problems(batch, sunlit)
     if problems:
         raise TrimError("\n".join(problems))
-    t_all = np.asarray(cols["t_s"], dtype=float)
-    if regular:
+    t_all = np.asarray(source.columns(0, source.n, ["t_s"])["t_s"], dtype=float)
+    if source.regular:
         k = np.rint(t_all / batch.dt_s).astype(np.int64)
         sel = (k >= batch.k0) & (k < batch.k1)
     else:
         sel = (t_all >= batch.from_s - 1e-9) & (t_all <= batch.to_s + 1e-9)
-    roll, yaw, speeds, sigma, head = telemetry_inputs(s, cols)
-    pick = [None if v is None else v[sel] for v in (roll, yaw, speeds, sigma, head)]
-    t = t_all[sel]
-    params, noise = build.estimator_model(s)
-    q = trim_noise(s, noise)
-    disc = (discretize(params, q, batch.dt_s) if regular
-            else StepTable.from_times(params, q, t))
-    pitch = cols["pitch_deg"][sel] * DEG if "pitch_deg" in cols else None
-    known = known_torques(s, t, pick[2], pick[0], pitch)
-    meas, u, extra = filter_inputs(s, params, *pick, known_Nm=known,
-                                   t_s=None if regular else t)
+    idx = np.flatnonzero(sel)
+    i0, i1 = int(idx[0]), int(idx[-1]) + 1      # times increase: one stretch of samples
+    t = t_all[i0:i1]
     n = len(t)
-    if not regular:   # the figure's rows as often in time as on the grid
+    if not source.regular:   # the figure's rows as often in time as on the grid
         stride = max(1, round(stride * batch.dt_s / float(np.median(np.diff(t)))))
     rows = np.unique(np.r_[np.arange(0, n, stride), n - 1])
-    result: FilterResult = kalman_filter(meas, disc, *initial_prior(s, params), u=u,
-                                         extra=extra, rows=rows)
+    x, theta, P_theta = _filter_rows(s, source, t_all, i0, i1, batch.dt_s, rows, windows)
     torque_states = slice(em.NPX, em.NCZ + 1)
-    theta = result.x[-1, torque_states]
-    P_theta = unpack(result.P_packed[-1])[torque_states, torque_states]
+    params, _ = build.estimator_model(s)
     v = equivalent_states(t_shape, shape, t[-1], params.omega0_radps)
-    fit = fit_kappa(theta, P_theta, v)
+    fit = fit_kappa(theta[torque_states], P_theta[torque_states, torque_states], v)
     solar = s.environment.solar
     rec = recommend(fit, solar.trim_tab_deg, solar.tab_effectiveness_Nm_per_deg)
-    x = result.x
     torque_xz = np.column_stack([x[:, em.NPX] + x[:, em.NCX], x[:, em.NPZ] + x[:, em.NCZ]])
     return TrimResult(batch, fit, rec, sunlit, t[rows], torque_xz, t_shape, shape, v)
+
+
+def _filter_rows(s: Scenario, source, t_all: np.ndarray, i0: int, i1: int, dt_s: float,
+                 rows: np.ndarray, windows: Windows
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The batch filter over samples [i0, i1) of ``source``: its states at ``rows``
+    (of the batch) and its state and covariance at the batch end.  Each window's
+    inputs, known torques included, are formed from its padded samples inside the
+    batch (``run.windowed``), so with one window they are the batch's own."""
+    params, noise = build.estimator_model(s)
+    q = trim_noise(s, noise)
+    regular = source.regular
+    disc = discretize(params, q, dt_s) if regular else None
+    pitch_name = ["pitch_deg"] if "pitch_deg" in source.names else []
+    names = used_names(source, s, tuple(pitch_name))
+    # The columns ``known_torques`` bridges with a straight line (``_filled``).
+    needed = wheel_names(s) + ["roll_deg"] + pitch_name
+    step = dt_s if regular else float(np.median(np.diff(t_all[i0:i1])))
+    pad = pad_samples(s, step)
+    # Off the grid each window's N_w* is resampled onto the batch's own points.
+    record = None if regular else (step, float(t_all[i0]))
+    prior = initial_prior(s, params)
+    xs = []
+    for a, b in window_bounds(t_all, i0, i1, windows):
+        c, d = padded_range(source, a, b, i0, i1, pad, needed)
+        cols = source.columns(c, d, names)
+        tw = np.asarray(cols["t_s"], dtype=float)
+        tel = telemetry_inputs(s, cols)
+        pitch = cols["pitch_deg"] * DEG if pitch_name else None
+        known = known_torques(s, tw, tel.speeds_radps, tel.roll_rad, pitch)
+        sl = slice(a - c, b - c)
+        meas, u, extra = cut_inputs(*filter_inputs(s, params, *tel, known_Nm=known,
+                                                   t_s=None if regular else tw,
+                                                   record=record), sl)
+        wdisc = disc if regular else StepTable.from_times(params, q, tw).cut(sl)
+        local = rows[(rows >= a - i0) & (rows < b - i0)] - (a - i0)
+        result: FilterResult = kalman_filter(meas, wdisc, *prior, u=u, extra=extra,
+                                             rows=local)
+        prior = (result.x_next, result.P_next)
+        xs.append(result.x)
+    # The batch's last sample is always a row: the last window's last kept one.
+    return np.concatenate(xs), result.x[-1], unpack(result.P_packed[-1])
 
 
 def true_kappa_Nm(s: Scenario) -> float:

@@ -5,7 +5,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -14,13 +16,15 @@ from ..config.loader import load_scenario
 from ..config.schema import Scenario
 from ..files.csvio import read_csv
 from ..files.screen import screen_messages
+from ..run.windowed import DAYS, Windows
 from .batch import (
     ASSUMED_KNOWN,
     ESTIMATED,
+    Batch,
     TrimError,
     TrimResult,
     choose_batch,
-    estimate_kappa,
+    kappa_from_source,
     trim_q_Nm2s,
     true_kappa_Nm,
 )
@@ -43,17 +47,31 @@ def telemetry_path(run_dir: Path, given: Path | None) -> Path:
                     "with output.telemetry: true); give one with --telemetry FILE")
 
 
-def read_run(run_dir: Path, telemetry: Path | None, overrides=()):
+@contextlib.contextmanager
+def read_run(run_dir: Path, telemetry: Path | None, overrides=(),
+             block_rows: int | None = None):
     """The run's scenario (with ``overrides``: --column, --unit, --epoch-utc), its
-    telemetry as `dynprop estimate` reads it (on the filter grid, or at its own times),
-    whether it has a truth, and whether the telemetry is on the grid."""
-    from ..run.estimate import estimate_inputs
+    telemetry as `dynprop estimate` reads it (on the filter grid, or at its own times)
+    as a ``TelemetrySource`` read by range, its scratch files in a temporary folder
+    removed on leaving, and whether the run has a truth."""
+    from ..files.telemetry_source import open_source
     if not (run_dir / "scenario.yaml").is_file():
         raise TrimError(f"{run_dir}: not a run directory (no scenario.yaml)")
     s = load_scenario(run_dir / "scenario.yaml", list(overrides))
     path = telemetry_path(run_dir, telemetry)
-    grid, _ = estimate_inputs(s, path)
-    return s, grid.columns, (run_dir / "truth.csv").is_file(), grid.regular, grid.screen
+    with tempfile.TemporaryDirectory(prefix="dynprop-trim-") as scratch:
+        source = open_source(path, s, Path(scratch), block_rows)
+        try:
+            yield s, source, (run_dir / "truth.csv").is_file()
+        finally:
+            source.close()
+
+
+def _batch_of(s: Scenario, source, from_s, to_s) -> Batch:
+    """``choose_batch`` from the telemetry's first and last sample times."""
+    ends = np.r_[source.columns(0, 1, ["t_s"])["t_s"],
+                 source.columns(source.n - 1, source.n, ["t_s"])["t_s"]]
+    return choose_batch(ends, s.sample_interval_s, from_s, to_s, source.regular)
 
 
 def _truth_solar(run_dir: Path, batch) -> tuple[np.ndarray, np.ndarray] | None:
@@ -195,7 +213,8 @@ def _side(s: Scenario, r: TrimResult, run_dir: Path, truth: bool) -> dict:
             **_gap_ends(run_dir)}
 
 
-def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) -> dict:
+def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool,
+           windows: Windows = DAYS) -> dict:
     """Fly the recommended tab from the start to the batch end (the same span and
     seed; telemetry written), into ``stage``/verify, and estimate κ again there."""
     from ..files.rundir import staged_run_dir
@@ -206,9 +225,9 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
     out = stage / "verify"
     with staged_run_dir(out, label="") as vstage:
         stream_to_directory(new, vstage)
-    _, cols, _, _, _ = read_run(out, None)    # the run just flown: on its grid
-    after = estimate_kappa(new, cols, choose_batch(cols["t_s"], new.sample_interval_s,
-                                                   r.batch.from_s, r.batch.to_s))
+    with read_run(out, None) as (flown, source, _):    # the run just flown: on its grid
+        after = kappa_from_source(new, source, _batch_of(flown, source, r.batch.from_s,
+                                                         r.batch.to_s), windows=windows)
     result = {"before": _side(s, r, run_dir, truth), "after": _side(new, after, out, True),
               "residual_fall": None}
     if truth and result["after"]["kappa_true_Nm"]:
@@ -219,25 +238,27 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool) 
 
 def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = None,
              telemetry: Path | None = None, do_verify: bool = False,
-             overrides=()) -> dict:
+             overrides=(), windows: Windows = DAYS, block_rows: int | None = None) -> dict:
     """Everything `dynprop trim` does; returns the trim.json dictionary.  ``overrides``
     are scenario keys for reading the telemetry (`dynprop estimate`'s --column, --unit,
-    --epoch-utc)."""
+    --epoch-utc); ``windows`` and ``block_rows`` how the telemetry is read
+    (``run.windowed``, the reader's block; test hooks)."""
     from ..figures.trim import trim_figure
     from ..files.rundir import staged_run_dir
     if (Path(run_dir) / "trim_loop.csv").is_file():
         raise TrimError(f"{run_dir}: this run moved its tab as it flew (trim.every_days, see "
                         "trim_loop.csv); dynprop trim needs a run flown at one tab setting")
-    s, cols, truth, regular, screened = read_run(run_dir, telemetry, overrides)
-    r = estimate_kappa(s, cols, choose_batch(cols["t_s"], s.sample_interval_s, from_s, to_s,
-                                             regular), regular=regular)
+    with read_run(Path(run_dir), telemetry, overrides, block_rows) as (s, source, truth):
+        r = kappa_from_source(s, source, _batch_of(s, source, from_s, to_s),
+                              windows=windows)
+        screened = source.screen
     d = report_dict(s, r, truth)
     d["screened"] = None if screened is None else screened.summary()
     d["warnings"] = screen_messages(d["screened"])
     # RUN_DIR/trim is trim's own, replaced each time (there is no --out to name).
     with staged_run_dir(run_dir / "trim", force=True, label="") as stage:
         if do_verify:
-            d["verify"] = verify(s, r, run_dir, stage, truth)
+            d["verify"] = verify(s, r, run_dir, stage, truth, windows)
         (stage / "trim.json").write_text(json.dumps(d, indent=2, allow_nan=False) + "\n")
         (stage / "trim.md").write_text(report_md(d))
         true_solar = _truth_solar(run_dir, r.batch)

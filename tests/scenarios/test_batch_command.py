@@ -532,7 +532,7 @@ def test_a_non_empty_out_is_left_untouched_and_refused_before_the_solve(
     def solved(*a, **k):
         raise AssertionError("the batches were solved before --out was checked")
 
-    monkeypatch.setattr(batch_report, "solve_spans", solved)
+    monkeypatch.setattr(batch_report, "solve_chain", solved)
     rc, stdout, err = run_cli("batch", str(run), "--model", "linear", "--out", str(out))
     assert_refused(rc, err, f"--out {out}: directory exists and is not empty (use --force)")
     assert [p.name for p in out.iterdir()] == ["keep.txt"]
@@ -747,7 +747,7 @@ def test_the_chains_consider_gap_is_its_a_prioris_covariance(run, batches):
         s = load_scenario(run / "scenario.yaml", [*no_consider, *moved])
         b = solve_spans(s, telemetry_inputs(s, cols), None, [n - 1], None, "linear", 12.0, 0.0)
         assert b.priors[1] == "batch 0, propagated to this epoch"
-        return b.x[n - 1], b.sigma_rows[0]
+        return b.x_rows[0], b.sigma_rows[0]
 
     def inertia(i, d):
         m = J.copy()
