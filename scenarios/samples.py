@@ -12,6 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 NEES_STRIDE = 10  # NEES on every 10th sample (5 s apart): plenty for means and figures
+#: Largest relative change of the filter's yaw σ between a truth row and the Sun-gap
+#: end it stands for, with a truth at some samples only (``run.estimate_truth``).
+END_SIGMA_MATCH = 0.01
 
 
 def output_rows(start: int, stop: int, stride: int) -> np.ndarray:

@@ -32,12 +32,9 @@ from dynprop.estimator.linear.model import H_WHEEL, N_STATES, R, Y
 from ..files.comparison import ComparisonInputs
 from ..files.summary import RunStatistics
 from ..records import FilterHistory
+from ..samples import END_SIGMA_MATCH
 from ..units import RAD2DEG
 from .filter_tally import FilterTally
-
-#: Largest relative change of the filter's yaw σ between a common row and the gap
-#: end it stands for (module doc).
-END_SIGMA_MATCH = 0.01
 
 
 def gap_end_rows(gaps, rows: np.ndarray, sigma_yaw: np.ndarray, n: int

@@ -19,6 +19,7 @@ from dynprop.estimator.linear.model import H_WHEEL, N_STATES, R, Y
 
 from ..files.summary import RunStatistics
 from ..records import Window
+from ..samples import END_SIGMA_MATCH
 from ..units import HOUR_S, RAD2DEG
 from .statistics import SETTLED_S, truth_extremes
 
@@ -227,7 +228,6 @@ class RunTally:
         """A gap end judged at the last common row at or before it, when that row is
         inside the gap and the yaw σ there is the end's (``run.estimate_truth``'s rule,
         the last row carried across windows)."""
-        from ..run.estimate_truth import END_SIGMA_MATCH
         a, sig = w.start, w.real.sigma
         rows = w.truth_rows
         i = int(np.searchsorted(rows, b - a, side="right")) - 1
