@@ -277,22 +277,36 @@ def non_number_cells(path: Path | str, numeric: list[str]) -> dict[str, np.ndarr
         while header.startswith("#"):
             header = fh.readline()
         cols = [(j, n) for j, n in enumerate(header.strip().split(",")) if n in numeric]
-        k = -1
-        for line in fh:
-            if not line.strip():
-                continue
-            k += 1
-            low = line.lower()
-            if "nan" not in low and "inf" not in low:
-                continue
-            cells = line.rstrip("\r\n").split(",")
-            for j, name in cols:
-                text = cells[j].strip() if j < len(cells) else ""
-                if text and not np.isfinite(float(text)):
-                    hits.setdefault(name, []).append(k)
+        k = non_number_rows(fh, cols, hits)
+    return marks_of(hits, k + 1)
+
+
+def non_number_rows(lines, cols: list[tuple[int, str]], hits: dict[str, list[int]]) -> int:
+    """Appends to ``hits`` (per column name) the data rows of ``lines`` whose cell in
+    column index j (``cols``: (j, name)) is written as a non-finite number, rows
+    counted from 0 with blank lines skipped, as ``read_csv`` counts them; returns the
+    last row's number (−1 for none)."""
+    k = -1
+    for line in lines:
+        if not line.strip():
+            continue
+        k += 1
+        low = line.lower()
+        if "nan" not in low and "inf" not in low:
+            continue
+        cells = line.rstrip("\r\n").split(",")
+        for j, name in cols:
+            text = cells[j].strip() if j < len(cells) else ""
+            if text and not np.isfinite(float(text)):
+                hits.setdefault(name, []).append(k)
+    return k
+
+
+def marks_of(hits: dict[str, list[int]], n: int) -> dict[str, np.ndarray]:
+    """``non_number_rows``' hits as a boolean column of ``n`` rows each."""
     marks = {}
     for name, rows in hits.items():
-        marks[name] = np.zeros(k + 1, dtype=bool)
+        marks[name] = np.zeros(n, dtype=bool)
         marks[name][rows] = True
     return marks
 

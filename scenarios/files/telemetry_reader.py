@@ -115,8 +115,9 @@ def read_input_csv(path: Path, kind: str, **how) -> dict[str, np.ndarray]:
         raise RunDirError(str(exc).splitlines()[0]) from None
 
 
-def read_parquet(path: Path, wanted: set[str], time_col: str) -> Table:
-    """The ``wanted`` columns of a Parquet file and its ``epoch_utc`` metadata."""
+def parquet_file(path: Path):
+    """``path`` opened as a ``pyarrow.parquet.ParquetFile`` (its schema read), or one
+    line saying why not: no pyarrow, no such file, not Parquet."""
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -127,12 +128,26 @@ def read_parquet(path: Path, wanted: set[str], time_col: str) -> Table:
         raise RunDirError(f"{path}: no such telemetry file")
     try:
         pf = pq.ParquetFile(path)
-        schema = pf.schema_arrow
+        _ = pf.schema_arrow    # converted here: a schema pyarrow refuses is this line too
+    except (pa.ArrowException, OSError) as exc:
+        raise not_parquet(path, exc) from None
+    return pf
+
+
+def not_parquet(path: Path, exc: Exception) -> RunDirError:
+    return RunDirError(f"{path}: not a Parquet file pyarrow can read "
+                       f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})")
+
+
+def read_parquet(path: Path, wanted: set[str], time_col: str) -> Table:
+    """The ``wanted`` columns of a Parquet file and its ``epoch_utc`` metadata."""
+    pf = parquet_file(path)
+    import pyarrow as pa
+    schema = pf.schema_arrow
+    try:
         table = pf.read(columns=[n for n in schema.names if n in wanted])
     except (pa.ArrowException, OSError) as exc:
-        raise RunDirError(f"{path}: not a Parquet file pyarrow can read "
-                          f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})"
-                          ) from None
+        raise not_parquet(path, exc) from None
     meta = {k.decode(errors="replace"): v.decode(errors="replace")
             for k, v in (schema.metadata or {}).items()}
     columns, problems, written = {}, [], {}

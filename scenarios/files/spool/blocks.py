@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..csvio import _first_bad_row, _parse_body, comments
+from ..csvio import _first_bad_row, _parse_body, comments, marks_of, non_number_rows
 from ..rundir import RunDirError
-from ..telemetry_reader import NS_PER
+from ..telemetry_reader import NS_PER, not_parquet, parquet_file
 
 CHUNK_CHARS = 4 << 20       # text read per block: ~38 k telemetry rows (a larger block is
                             # no faster, and malloc keeps more of it)
@@ -232,24 +232,8 @@ def _written(chunk: str | None, data: bytes | None, names, numbers, n: int
         return {}
     cols = [(j, name) for j, name in enumerate(names) if name in numbers]
     hits: dict[str, list[int]] = {}
-    k = -1
-    for line in chunk.split("\n"):
-        if not line.strip():
-            continue
-        k += 1
-        low = line.lower()
-        if "nan" not in low and "inf" not in low:
-            continue
-        cells = line.rstrip("\r\n").split(",")
-        for j, name in cols:
-            cell = cells[j].strip() if j < len(cells) else ""
-            if cell and not np.isfinite(float(cell)):
-                hits.setdefault(name, []).append(k)
-    marks = {}
-    for name, rows in hits.items():
-        marks[name] = np.zeros(n, dtype=bool)
-        marks[name][rows] = True
-    return marks
+    non_number_rows(chunk.split("\n"), cols, hits)
+    return marks_of(hits, n)
 
 
 def _may_hold_non_numbers(chunk: str) -> bool:
@@ -340,19 +324,9 @@ def _arrow_reader(names, text, numbers):
 # --------------------------------------------------------------------------- Parquet
 
 def _parquet_blocks(path: Path, wanted: set[str], time_col: str, block_rows):
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:
-        raise RunDirError(f"{path}: reading Parquet needs pyarrow: pip install "
-                          "'dynprop[parquet]'") from None
-    if not path.is_file():
-        raise RunDirError(f"{path}: no such telemetry file")
-    try:
-        pf = pq.ParquetFile(path)
-        schema = pf.schema_arrow
-    except (pa.ArrowException, OSError) as exc:
-        raise _not_parquet(path, exc) from None
+    pf = parquet_file(path)
+    import pyarrow as pa
+    schema = pf.schema_arrow
     meta = {k.decode(errors="replace"): v.decode(errors="replace")
             for k, v in (schema.metadata or {}).items()}
     head = Header(list(schema.names), meta.get("epoch_utc"), "its Parquet metadata epoch_utc")
@@ -367,11 +341,6 @@ def _parquet_blocks(path: Path, wanted: set[str], time_col: str, block_rows):
                   or pa.types.is_floating(kind) or pa.types.is_boolean(kind)):
             problems[name] = f"{path}: column {name} has type {kind}, not numbers or time tags"
     return head, _parquet_rows(pf, path, names, problems, block_rows)
-
-
-def _not_parquet(path, exc) -> RunDirError:
-    return RunDirError(f"{path}: not a Parquet file pyarrow can read "
-                       f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})")
 
 
 def _parquet_rows(pf, path, names, problems, block_rows) -> Iterator[Block]:
@@ -404,7 +373,7 @@ def _parquet_rows(pf, path, names, problems, block_rows) -> Iterator[Block]:
                 yield Block(row0, batch.num_rows, cols, written)
             row0 += batch.num_rows
     except (pa.ArrowException, OSError) as exc:
-        raise _not_parquet(path, exc) from None
+        raise not_parquet(path, exc) from None
     # read_parquet's lines, in the file's column order, once every row is seen.
     lines = [problems.get(n) or (f"{path}: row {no_tag[n] + 2}, column {n}: no time tag"
                                  if n in no_tag else None) for n in names]
