@@ -40,23 +40,6 @@ def run_to_directory(s: Scenario, stage: Path, montecarlo_case: int | None = Non
     return stream_to_directory(s, stage, steering=steering)
 
 
-def estimate_inputs_of(s: Scenario, telemetry: Path, truth: Path | None):
-    """`dynprop estimate`'s reading, before anything is written: the telemetry on the
-    filter's grid, the truth at its samples (or None) and the ``sources`` that
-    summary.json names (``estimate_to_directory``'s last argument)."""
-    from .run.estimate import estimate_inputs
-    grid, truth_rows = estimate_inputs(s, telemetry, truth)
-    # Absolute: a later `trim`/`tune` on the directory finds them from anywhere.
-    sources = {"file": str(Path(telemetry).resolve()),
-               "truth_file": None if truth is None else str(Path(truth).resolve())}
-    return grid, truth_rows, sources
-
-
-def _is_aem(path) -> bool:
-    from .run.estimate import _is_aem as is_aem
-    return is_aem(path)
-
-
 WINDOW_SAMPLES_ENV = "DYNPROP_WINDOW_SAMPLES"   # a test hook: small windows in a subprocess
 
 
@@ -71,7 +54,8 @@ def estimate_into(s: Scenario, telemetry: Path, truth: Path | None, stage: Path,
     import os
     sources = {"file": str(Path(telemetry).resolve()),
                "truth_file": None if truth is None else str(Path(truth).resolve())}
-    if truth is not None and _is_aem(truth):
+    from .files.truth_aem import is_aem
+    if truth is not None and is_aem(truth):
         # An attitude history (attitude alone): held whole (``run.estimate``).
         from .run.estimate import estimate_inputs, estimate_to_directory
         grid, truth_rows = estimate_inputs(s, telemetry, truth)

@@ -23,6 +23,7 @@ from ..config.loader import load_scenario
 from ..config.schema import Scenario
 from ..files.rundir import RunDirError
 from ..files.telemetry_file import GriddedTelemetry, run_telemetry
+from ..files.truth_aem import is_aem
 from ..run.windowed import (
     DAYS,
     Windows,
@@ -95,20 +96,10 @@ def read_source(source: Path, scenario: str | Path | None = None, overrides=(),
     return BatchSource(s, path, truth, run_dir, grid, truth_rows)
 
 
-def _is_aem(path) -> bool:
-    """An attitude history (CCSDS AEM) rather than a truth.csv, by its first keyword
-    (as `dynprop estimate` tells them apart)."""
-    try:
-        with open(path, "rb") as f:
-            return f.read(256).lstrip().startswith(b"CCSDS_AEM_VERS")
-    except OSError:
-        return False    # read_truth says what is wrong with it
-
-
 def truth_at(s: Scenario, path: Path, t: np.ndarray, regular: bool):
     """The truth file at the telemetry's samples ``t`` (``run.estimate.estimate_inputs``'
     truth: a truth.csv or an AEM)."""
-    if _is_aem(path):
+    if is_aem(path):
         from ..files.aem import AemError
         from ..files.truth_aem import read_truth_aem
         try:

@@ -192,12 +192,7 @@ def read_screened(path: Path, s: Scenario) -> tuple[dict[str, np.ndarray], Scree
     for k, name in enumerate(wheels):
         ends = cols[name][[0, -1]] if name in cols and len(cols[name]) >= 2 else ()
         if not np.all(np.isfinite(ends)):
-            problems.append(f"{path}: column {getattr(c, f'wheel{k + 1}', name)} must have a "
-                            "value in the first and the last row (a dropout is bridged "
-                            "between readings)" + (
-                                "; the screen took it out there (telemetry.screen)"
-                                if report is not None and any(
-                                    x.column == name for x in report.screened) else ""))
+            problems.append(wheel_end_problem(path, c, k, name, report))
     present = np.isfinite(cols["yaw_deg"]) if "yaw_deg" in cols else None
     if "yaw_sigma_deg" in cols and present is not None:
         sig = cols["yaw_sigma_deg"][present]
@@ -211,6 +206,16 @@ def read_screened(path: Path, s: Scenario) -> tuple[dict[str, np.ndarray], Scree
     if problems:
         raise RunDirError("\n".join(cap_lines(problems)))
     return cols, report
+
+
+def wheel_end_problem(path, c, k: int, name: str, report: ScreenReport | None) -> str:
+    """The line for wheel ``k`` (canonical ``name``; ``c`` the file's column names)
+    without a reading in the file's first or last row."""
+    return (f"{path}: column {getattr(c, f'wheel{k + 1}', name)} must have a value in the "
+            "first and the last row (a dropout is bridged between readings)" + (
+                "; the screen took it out there (telemetry.screen)"
+                if report is not None and any(x.column == name for x in report.screened)
+                else ""))
 
 
 def on_grid(cols: dict[str, np.ndarray], dt_s: float, max_gap_s: float,

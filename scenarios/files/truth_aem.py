@@ -52,6 +52,16 @@ class TruthFromAem(TruthFromFile):
     interpolated: int
 
 
+def is_aem(path) -> bool:
+    """An attitude history (CCSDS AEM, attitude only) rather than a truth.csv: by its
+    first keyword, whatever the file is called."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(256).lstrip().startswith(b"CCSDS_AEM_VERS")
+    except OSError:
+        return False    # read_truth says what is wrong with it
+
+
 def attitude_at(segments: list[AemSegment], stamps: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(indices into ``stamps`` inside a segment, their quaternions C_{body←frame}, the

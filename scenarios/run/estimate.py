@@ -23,6 +23,7 @@ from ..files.comparison import PitchRows, comparison_arrays
 from ..files.csvio import write_csv
 from ..files.rundir import RunDirError
 from ..files.summary import assemble_summary, write_summary
+from ..files.truth_aem import is_aem
 from ..records import FilterHistory
 from ..samples import nees_rows, output_rows, sun_gaps, sun_gaps_at
 from ..units import DEG
@@ -52,7 +53,7 @@ def estimate_inputs(s: Scenario, path: Path, truth_path: Path | None = None):
     grid = on_grid(cols, s.sample_interval_s, s.estimator.max_gap_s, path, report)
     if truth_path is None:
         return grid, None
-    if _is_aem(truth_path):
+    if is_aem(truth_path):
         from ..files.aem import AemError
         from ..files.truth_aem import read_truth_aem
         try:
@@ -60,16 +61,6 @@ def estimate_inputs(s: Scenario, path: Path, truth_path: Path | None = None):
         except AemError as exc:
             raise RunDirError(str(exc)) from None
     return grid, read_truth(truth_path, s, grid.columns["t_s"], grid.regular)
-
-
-def _is_aem(path) -> bool:
-    """An attitude history (CCSDS AEM, attitude only: ``files.truth_aem``) rather than
-    a truth.csv: by its first keyword, whatever the file is called."""
-    try:
-        with open(path, "rb") as f:
-            return f.read(256).lstrip().startswith(b"CCSDS_AEM_VERS")
-    except OSError:
-        return False    # read_truth says what is wrong with it
 
 
 def attitude_only(truth) -> bool:

@@ -20,7 +20,7 @@ from ...config import build
 from ...config.suggestions import cap_lines
 from ..rundir import RunDirError
 from ..screen import unit_problems
-from ..telemetry_file import GRID_TOLERANCE
+from ..telemetry_file import GRID_TOLERANCE, wheel_end_problem
 from ..telemetry_reader import (
     MEASUREMENTS,
     SUN_ANGLE_COLUMNS,
@@ -209,12 +209,7 @@ class Pass:
                                                                      self.n_rows)[0]]
                     if screened else self.raw_ends[name])
             if not np.all(np.isfinite(ends)):
-                problems.append(f"{path}: column {getattr(c, f'wheel{k + 1}', name)} must "
-                                "have a value in the first and the last row (a dropout is "
-                                "bridged between readings)" + (
-                                    "; the screen took it out there (telemetry.screen)"
-                                    if report is not None and any(
-                                        x.column == name for x in report.screened) else ""))
+                problems.append(wheel_end_problem(path, c, k, name, report))
         if self.raw_sigma_bad if not screened else self.sigma_bad:
             problems.append(f"{path}: {c.yaw_sigma} must be positive wherever {c.yaw} is "
                             "present")
