@@ -59,7 +59,10 @@ def headline(daily: dict[str, np.ndarray]) -> str:
     s = np.asarray(daily["gap_end_yaw_sigma_deg"], float)
     out, n = outside_3sigma(e, s)
     days = len(e)
-    if n == 0:
+    ends = int(np.sum(np.isfinite(s)))
+    if n == 0 and ends:
+        verdict = f"not tested (no truth: the filter's ±3σ at {ends} Sun-gap ends only)"
+    elif n == 0:
         verdict = f"not tested (no Sun-gap end in these {days} days)"
     else:
         z = np.where(np.isfinite(e) & np.isfinite(s), np.abs(e) / s, -1.0)
@@ -118,7 +121,11 @@ def plot_season(daily: dict[str, np.ndarray], title: str, warnings=()):
     if notes:
         ax.set_title(f"scaled to the errors; beyond the axes: {', '.join(notes)}",
                      loc="right", fontsize=8, color="0.15")
-    if n == 0:
+    if n == 0 and has.any():
+        # A telemetry file without a truth: the filter's own σ, no error to judge.
+        _note(ax, f"not tested: no truth to judge the errors at these {int(has.sum())} "
+                  "Sun-gap ends against")
+    elif n == 0:
         _note(ax, f"not tested: no Sun-gap end in these {len(x)} days")
 
     ax = axes[1]
@@ -138,7 +145,10 @@ def plot_season(daily: dict[str, np.ndarray], title: str, warnings=()):
                               ("yaw_error_rms_linear_deg", "linearized yaw RMS", "--"),
                               ("yaw_error_rms_real_minus_linear_deg",
                                "RMS of real − linearized yaw", ":")):
-        ax.plot(x, daily[key], style, lw=1.2, label=label)
+        if np.isfinite(daily[key]).any() or key == "yaw_error_rms_deg":
+            ax.plot(x, daily[key], style, lw=1.2, label=label)
+    if not np.isfinite(daily["yaw_error_rms_deg"]).any():
+        _note(ax, "not tested: no truth, so no errors to take the RMS of")
     values = np.r_[daily["yaw_error_rms_deg"], daily["yaw_error_rms_real_minus_linear_deg"]]
     values = values[np.isfinite(values) & (values > 0)]
     if values.size and values.max() / values.min() > 30:
