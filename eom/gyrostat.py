@@ -150,9 +150,27 @@ def solar_torque(sun_b, coef, lever_axis):
     return coef * _cross(lever_axis, sun_b)
 
 
+def offset_torque(sun_b, coef, lever_axis):
+    """The solar array's offset torque ``κ_o ŝ⊥``, ŝ⊥ = ŝ − (d̂·ŝ) d̂: the Sun direction in
+    the plane normal to the lever axis d̂ (``sim.environment.SolarTorque``).  ``coef`` is
+    κ_o scaled as ``solar_torque``'s.  Perpendicular to the tab's d̂ × ŝ, in the same
+    plane."""
+    if _numeric(sun_b):
+        d = np.asarray(lever_axis, dtype=float)
+        return coef * (sun_b - (sun_b @ d)[..., None] * d)
+    return coef * (sun_b - ca.dot(lever_axis, sun_b) * lever_axis)
+
+
 def magnetic_torque(dipole_b, field_b):
     """``m × B``, both in body axes (B is constant in the orbit frame at GEO)."""
     return _cross(dipole_b, field_b)
+
+
+def torquer_dipole(field_b, t_des, m_max, floor: float = 1e-30):
+    """The cross-product law ``m = B × T_des / |B|²`` for any desired torque (symbolic),
+    each axis saturated at ±``m_max``: m × B is then T_des less its part along B."""
+    m = _cross(field_b, t_des) / (ca.dot(field_b, field_b) + floor)
+    return ca.fmin(ca.fmax(m, -m_max), m_max)
 
 
 def unloading_dipole(field_b, h, gain, m_max, floor: float = 1e-30):

@@ -19,6 +19,19 @@ damp the orbit-rate mode: the total inertial momentum is conserved and the wheel
 store only pitch and yaw momentum, so with magnetic unloading off that mode is
 neutral (a physical limit of wheel-only momentum-bias control, also tested).
 Each loop can be switched off on its own.
+
+* Momentum direction through magnetic torquers (issue 45; off by default): the
+  unloading law above holds only h.  With ``momentum_direction_gain_per_s`` k_d > 0 the
+  torquers also steer the whole momentum, ``T_des += −k_d C_BR P H_R``, where H_R is
+  the total angular momentum (body and wheels) in the orbit frame and P keeps its
+  roll and yaw components, the part off the orbit normal.  In the orbit frame
+  ``Ḣ_R = T_R − ω_RN × H_R`` with ω_RN = −ω0 ŷ, so those two components obey
+  ``Ḣx = Tx + ω0 Hz``, ``Ḣz = Tz − ω0 Hx``: a neutral pair at ±iω0, fixed in inertial
+  space, which only an external torque moves (the wheels store y and z only).  The
+  law puts that pair at ``−k_d ± iω0`` (less the part of P H along the field, which
+  m × B cannot give: ``docs/conventions.md``).  The controller uses the attitude and
+  wheel speeds; on the spacecraft the yaw comes from the Sun sensors and the ground,
+  and the loop, with a time constant of a day, does not see a 0.04° yaw error.
 """
 
 from __future__ import annotations
@@ -27,7 +40,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-from dynprop.eom.gyrostat import euler312, unloading_dipole
+from dynprop.eom.gyrostat import euler312, torquer_dipole, total_momentum, unloading_dipole
 
 
 @dataclass(frozen=True)
@@ -43,6 +56,7 @@ class Control:
     magnetic_unloading: bool = True
     unloading_gain_per_s: float = 3e-4     # k_m
     torquer_max_Am2: float = 10.0
+    momentum_direction_gain_per_s: float = 0.0  # k_d (0: off)
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -52,6 +66,8 @@ class Control:
             raise ValueError("pitch bandwidth and damping must be non-negative")
         if self.torquer_max_Am2 < 0:
             raise ValueError("torquer saturation must be non-negative")
+        if self.momentum_direction_gain_per_s < 0:
+            raise ValueError("momentum direction gain must be non-negative")
 
 
 def wheel_allocation(axes: np.ndarray) -> np.ndarray:
@@ -63,10 +79,12 @@ def wheel_allocation(axes: np.ndarray) -> np.ndarray:
     return np.linalg.pinv(np.asarray(axes, dtype=float).T[1:3, :])
 
 
-def control_law(c_br, w_br, wheel_speeds, field_r, prm):
+def control_law(c_br, w_br, wheel_speeds, field_r, prm, w_bn=None):
     """Symbolic control commands (motor torques u, torquer dipole m) at step start.
 
-    ``prm`` is the unpacked parameter dict of ``sim.step``.
+    ``prm`` is the unpacked parameter dict of ``sim.step``; with ``w_bn`` (ω_BN, body)
+    and the managed step's ``dir_gain``, the torquers also steer the momentum's
+    direction (the module doc).
     """
     _, roll, pitch = euler312(c_br)
     h = ca.dot(prm["A"][2, :].T, prm["Iw"] * wheel_speeds)
@@ -76,5 +94,10 @@ def control_law(c_br, w_br, wheel_speeds, field_r, prm):
         + prm["h_gain"] * h
     u = on * (prm["alloc"] @ ca.vertcat(pitch_demand, yaw_demand))
 
-    m = on * unloading_dipole(c_br @ field_r, h, prm["mtq_gain"], prm["mtq_max"])
-    return u, m
+    field_b = c_br @ field_r
+    if w_bn is None:
+        return u, on * unloading_dipole(field_b, h, prm["mtq_gain"], prm["mtq_max"])
+    h_r = c_br.T @ total_momentum(w_bn, wheel_speeds, prm["J"], prm["Iw"], prm["A"])
+    t_des = ca.vertcat(0, 0, -prm["mtq_gain"] * h) \
+        - prm["dir_gain"] * (c_br @ ca.vertcat(h_r[0], 0, h_r[2]))
+    return u, on * torquer_dipole(field_b, t_des, prm["mtq_max"])

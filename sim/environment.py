@@ -40,6 +40,18 @@ class SolarTorque:
     effectiveness of 2.5e-6 N m/deg lets the tab reach any residual between
     1e-7 and 1e-5 N m (either sign) within ±25° of full trim at 20°.  The default
     tab of 19.6° leaves a 1e-6 N m residual.
+
+    The array's offset angle is a second actuator (GOES I-M momentum management,
+    US patent 5,996,942).  Turning the array by δ from Sun-normal tilts its
+    radiation force out of the Sun line, towards d̂ × ŝ; with the array-to-sail
+    lever along d̂ the torque is along d̂ × (d̂ × ŝ) = −ŝ⊥, where ŝ⊥ = ŝ − (d̂·ŝ) d̂
+    is the Sun direction in the plane normal to d̂.  It is written
+    ``κ_o · ŝ⊥ · (1 AU / r)² · shadow``, ``κ_o = untrimmed_offset − offset_effectiveness · δ``,
+    perpendicular to the tab's torque in the same (orbit) plane, so the two
+    actuators together reach any torque in that plane.  ``untrimmed_offset`` is the
+    imbalance along ŝ⊥ with the array Sun-normal (0 by default: the paper's model
+    has none); 5e-7 N m/deg is an assumed effectiveness, a fifth of the tab's,
+    for a ±10° offset range.
     """
 
     enabled: bool = True
@@ -47,12 +59,17 @@ class SolarTorque:
     tab_effectiveness_Nm_per_deg: float = 2.5e-6
     trim_tab_deg: float = 19.6
     lever_axis: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    array_offset_deg: float = 0.0
+    offset_effectiveness_Nm_per_deg: float = 5e-7
+    untrimmed_offset_torque_Nm: float = 0.0
 
     def __post_init__(self) -> None:
         _finite_vector(self.lever_axis, "solar lever axis")
         if abs(np.linalg.norm(self.lever_axis) - 1.0) > 1e-9:
             raise ValueError("solar lever axis must be a unit vector")
-        for name in ("untrimmed_torque_Nm", "tab_effectiveness_Nm_per_deg", "trim_tab_deg"):
+        for name in ("untrimmed_torque_Nm", "tab_effectiveness_Nm_per_deg", "trim_tab_deg",
+                     "array_offset_deg", "offset_effectiveness_Nm_per_deg",
+                     "untrimmed_offset_torque_Nm"):
             if not np.isfinite(getattr(self, name)):
                 raise ValueError(f"solar {name} must be finite")
 
@@ -60,6 +77,12 @@ class SolarTorque:
     def coefficient_Nm(self) -> float:
         """Signed residual imbalance κ at 1 AU (N m)."""
         return self.untrimmed_torque_Nm - self.tab_effectiveness_Nm_per_deg * self.trim_tab_deg
+
+    @property
+    def offset_coefficient_Nm(self) -> float:
+        """Signed imbalance κ_o along ŝ⊥ at 1 AU (N m), the array offset's actuator."""
+        return self.untrimmed_offset_torque_Nm \
+            - self.offset_effectiveness_Nm_per_deg * self.array_offset_deg
 
     @classmethod
     def with_residual(cls, residual_Nm: float, **kwargs) -> SolarTorque:

@@ -15,6 +15,11 @@ prescribed control dipole; n_ext (3, N m), any extra body torque; u_wheel (n, N 
 motor torques added to the control's (a momentum dump, a test profile); and
 ripple (n, N m), the motor-torque ripple held over the step.  The geomagnetic field is a
 parameter: for a geostationary satellite it is constant in the orbit frame.
+
+The *managed* step (``managed=True``) adds two parameters, the array offset's
+torque coefficient κ_o and the momentum-direction gain k_d (``sim.control``), and
+their terms.  It is built only for runs that use either, so every other run keeps
+the step it always had, bit for bit.
 """
 
 from __future__ import annotations
@@ -31,9 +36,22 @@ from .environment import Environment
 from .frames import GeoOrbit
 from .spacecraft import Spacecraft
 
+MANAGED_PARAMS = (("offset_coef", (1, 1)), ("dir_gain", (1, 1)))
 
-def param_layout(n: int) -> tuple[tuple[str, tuple[int, int]], ...]:
+
+def is_managed(env: Environment, control: Control) -> bool:
+    """Whether a run needs the managed step: an array offset torque or the momentum
+    direction law."""
+    return bool((env.solar.enabled and env.solar.offset_coefficient_Nm != 0)
+                or (control.enabled and control.momentum_direction_gain_per_s > 0))
+
+
+def param_layout(n: int, managed: bool = False) -> tuple[tuple[str, tuple[int, int]], ...]:
     """Names and shapes of the packed parameter vector, in order."""
+    return _base_layout(n) + (MANAGED_PARAMS if managed else ())
+
+
+def _base_layout(n: int) -> tuple[tuple[str, tuple[int, int]], ...]:
     return (("J", (3, 3)), ("Js_inv", (3, 3)), ("Iw", (n, 1)), ("A", (3, n)),
             ("w0", (1, 1)), ("dt", (1, 1)), ("sun_turn", (4, 1)), ("gg_coef", (1, 1)),
             ("solar_coef", (1, 1)),
@@ -50,21 +68,21 @@ def input_layout(n: int) -> tuple[tuple[str, int], ...]:
             ("ripple", n))
 
 
-def n_params(n: int) -> int:
-    return sum(r * c for _, (r, c) in param_layout(n))
+def n_params(n: int, managed: bool = False) -> int:
+    return sum(r * c for _, (r, c) in param_layout(n, managed))
 
 
-def unpack_params(p, n: int) -> dict:
+def unpack_params(p, n: int, managed: bool = False) -> dict:
     """Named symbolic slices of the parameter vector (column-major reshapes)."""
     out, i = {}, 0
-    for name, (r, c) in param_layout(n):
+    for name, (r, c) in param_layout(n, managed):
         out[name] = ca.reshape(p[i:i + r * c], r, c)
         i += r * c
     return out
 
 
 def pack_params(spacecraft: Spacecraft, orbit: GeoOrbit, env: Environment,
-                control: Control, dt_s: float) -> np.ndarray:
+                control: Control, dt_s: float, managed: bool = False) -> np.ndarray:
     """Numeric parameter vector in ``param_layout`` order.
 
     The field is that of a geostationary satellite at the orbit's longitude.  It
@@ -104,9 +122,14 @@ def pack_params(spacecraft: Spacecraft, orbit: GeoOrbit, env: Environment,
         "alloc": wheel_allocation(spacecraft.wheel_axes),
         "mtq_gain": control.unloading_gain_per_s * control.magnetic_unloading,
         "mtq_max": control.torquer_max_Am2,
+        "offset_coef": env.solar.offset_coefficient_Nm * env.solar.enabled,
+        "dir_gain": control.momentum_direction_gain_per_s * roll_yaw,
     }
+    if not managed and is_managed(env, control):
+        raise ValueError("an array offset torque or the momentum direction law needs the "
+                         "managed step (managed=True)")
     parts = [np.asarray(vals[name], dtype=float).reshape((r, c)).ravel(order="F")
-             for name, (r, c) in param_layout(n)]
+             for name, (r, c) in param_layout(n, managed)]
     return np.concatenate(parts)
 
 
@@ -121,18 +144,22 @@ def _rates(x, u, n_ext_total, prm, n: int):
 
 
 def _env_torques(q, sun_r, ex, prm, m_ctrl):
-    """Gravity gradient, solar, magnetic disturbance and magnetic control torques."""
+    """Gravity gradient, solar (with the array offset's in the managed step), magnetic
+    disturbance and magnetic control torques."""
     c_br = dyn.dcm_from_quat(q)
     t_gg = dyn.gravity_gradient_torque(c_br[:, 2], prm["J"], prm["gg_coef"])
-    t_sol = dyn.solar_torque(c_br @ sun_r, prm["solar_coef"] * ex["sun_scale"],
-                             prm["solar_axis"])
+    sun_b = c_br @ sun_r
+    t_sol = dyn.solar_torque(sun_b, prm["solar_coef"] * ex["sun_scale"], prm["solar_axis"])
+    if "offset_coef" in prm:
+        t_sol = t_sol + dyn.offset_torque(sun_b, prm["offset_coef"] * ex["sun_scale"],
+                                          prm["solar_axis"])
     t_mag = dyn.magnetic_torque(prm["m_res"] + ex["m_prof"], c_br @ prm["field_r"])
     t_mtq = dyn.magnetic_torque(m_ctrl, c_br @ prm["field_r"])
     return t_gg, t_sol, t_mag, t_mtq
 
 
 @lru_cache(maxsize=8)
-def build_step(n: int) -> ca.Function:
+def build_step(n: int, managed: bool = False) -> ca.Function:
     """One RK4 step ``(x, e, p) -> (x_next, aux)``, expanded to SX.
 
     The control is evaluated once from the state at the start of the step and
@@ -144,13 +171,14 @@ def build_step(n: int) -> ca.Function:
     """
     x = ca.SX.sym("x", 7 + n)
     ex = {name: ca.SX.sym(name, k) for name, k in input_layout(n)}
-    p = ca.SX.sym("p", n_params(n))
-    prm = unpack_params(p, n)
+    p = ca.SX.sym("p", n_params(n, managed))
+    prm = unpack_params(p, n, managed)
     dt = prm["dt"]
 
     c_br0 = dyn.dcm_from_quat(x[0:4])
     w_br0 = x[4:7] - c_br0 @ ca.vertcat(0, -prm["w0"], 0)
-    u_cmd, m_cmd = control_law(c_br0, w_br0, x[7:7 + n], prm["field_r"], prm)
+    u_cmd, m_cmd = control_law(c_br0, w_br0, x[7:7 + n], prm["field_r"], prm,
+                               x[4:7] if managed else None)
     u = u_cmd + ex["u_wheel"] + ex["ripple"]
 
     def f(xs, sun_r):
@@ -177,7 +205,8 @@ def build_step(n: int) -> ca.Function:
     # cse() trims the step by about a fifth for both the VM and compiled code.
     xn, aux = ca.vertsplit(ca.cse(ca.vertcat(xn, aux)), [0, xn.numel(), xn.numel() + aux.numel()])
     names = [name for name, _ in input_layout(n)]
-    return ca.Function(f"dynprop_step{n}", [x, *(ex[k] for k in names), p], [xn, aux],
+    name = f"dynprop_step{n}" + ("m" if managed else "")
+    return ca.Function(name, [x, *(ex[k] for k in names), p], [xn, aux],
                        ["x", *names, "p"], ["xn", "aux"])
 
 
@@ -197,3 +226,13 @@ def split_aux(aux: np.ndarray, n: int) -> dict[str, np.ndarray]:
         out[name] = aux[:, i] if k == 1 else aux[:, i:i + k]
         i += k
     return out
+
+
+def aux_slice(n: int, name: str) -> slice:
+    """The columns of ``name`` in an aux history (``aux_layout``)."""
+    i = 0
+    for key, k in aux_layout(n):
+        if key == name:
+            return slice(i, i + k)
+        i += k
+    raise KeyError(name)

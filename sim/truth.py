@@ -29,8 +29,9 @@ from .disturbance import Disturbance, DisturbanceDraw
 from .environment import Environment
 from .frames import GeoOrbit, dcm_from_quat, quat_from_euler312
 from .history import TruthResult, truth_result
+from .momentum import SolarManagement, SolarManager
 from .spacecraft import Spacecraft
-from .step import build_step, input_layout, pack_params
+from .step import aux_slice, build_step, input_layout, is_managed, pack_params
 from .sun_inputs import near_shadow, profiled, shadow_fine, step_inputs, sun_nodes, sun_on_grid
 
 DEFAULT_CHUNK = 4096
@@ -67,10 +68,13 @@ class InitialState:
 class TruthModel:
     """The compiled truth step for one wheel count, built once and reused."""
 
-    def __init__(self, n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str | None = None):
+    def __init__(self, n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str | None = None,
+                 managed: bool = False):
         self.n_wheels = n_wheels
         self.chunk = chunk
-        self.rollout_engine = ChunkedRollout(build_step(n_wheels), chunk, TAIL_CHUNK, backend)
+        self.managed = managed
+        self.rollout_engine = ChunkedRollout(build_step(n_wheels, managed), chunk, TAIL_CHUNK,
+                                             backend)
         self.backend = self.rollout_engine.backend
 
     def rollout(self, x0: np.ndarray, inputs: dict[str, np.ndarray], p: np.ndarray
@@ -83,8 +87,9 @@ class TruthModel:
 
 
 @lru_cache(maxsize=8)
-def truth_model(n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str = "auto") -> TruthModel:
-    return TruthModel(n_wheels, chunk, backend)
+def truth_model(n_wheels: int, chunk: int = DEFAULT_CHUNK, backend: str = "auto",
+                managed: bool = False) -> TruthModel:
+    return TruthModel(n_wheels, chunk, backend, managed)
 
 
 def _checked(a: np.ndarray | None, shape: tuple[int, int], name: str) -> np.ndarray:
@@ -118,7 +123,8 @@ class TruthStream:
                  extra_torque: np.ndarray | None = None,
                  wheel_torque: np.ndarray | None = None, model: TruthModel | None = None,
                  disturbance: Disturbance | None = None,
-                 disturbance_rng: np.random.Generator | None = None):
+                 disturbance_rng: np.random.Generator | None = None,
+                 managed: bool = False, solar_management: SolarManagement | None = None):
         if not (np.isfinite(duration_s) and duration_s >= 0):
             raise ValueError("duration_s must be finite and non-negative")
         if not (np.isfinite(dt_s) and dt_s > 0):
@@ -140,20 +146,52 @@ class TruthStream:
             if disturbance_rng is None:
                 raise ValueError("a disturbance_rng is required when a disturbance is flown")
             self.disturbance_draw = DisturbanceDraw(disturbance, dt_s, disturbance_rng)
-        self.p = pack_params(spacecraft, orbit, environment, control, dt_s)
-        self.model = model or truth_model(nw, DEFAULT_CHUNK, requested_backend())
+        # The managed step (``sim.step``) only where it is needed, or asked for by a run
+        # that will need it later (momentum management moving the array offset).
+        self.managed = managed or is_managed(environment, control)
+        self.p = pack_params(spacecraft, orbit, environment, control, dt_s, self.managed)
+        self.model = model or truth_model(nw, DEFAULT_CHUNK, requested_backend(), self.managed)
+        if self.model.managed != self.managed:
+            raise ValueError("the truth model's step does not match the run's (managed)")
         self.x = initial.state_vector(spacecraft, orbit)
         self.jd0 = ephemeris.julian_date(epoch)
         self.gmst0 = ephemeris.gmst_rad(self.jd0)
         self.sun_nodes = sun_nodes(n, dt_s, self.jd0)
         self.next_start = 0
+        self.manager = None
+        if solar_management is not None:
+            if not self.managed:
+                raise ValueError("solar management moves the array offset: it needs the "
+                                 "managed step (managed=True)")
+            self.manager = SolarManager(solar_management, spacecraft, orbit, self.gmst0, dt_s,
+                                        self.sun_nodes, aux_slice(nw, "t_mtq"), self.x)
 
     def retrim(self, solar) -> None:
         """Fly ``solar`` (a new trim-tab setting) from the next window on: the ground
         commanding the tab mid-run (``scenarios.trim_loop``).  Nothing else changes."""
         self.environment = dataclasses.replace(self.environment, solar=solar)
         self.p = pack_params(self.spacecraft, self.orbit, self.environment, self.control,
-                             self.dt_s)
+                             self.dt_s, self.managed)
+
+    def _pieces(self, a: int, b: int, piece: int) -> list[tuple[int, int]]:
+        """Rows [lo, hi) of the window's rollout pieces: ``piece`` samples each, split
+        where solar management commands (``sim.momentum``)."""
+        cuts = set(range(0, b - a, piece))
+        if self.manager is not None:
+            cuts.update(k - a for k in self.manager.breaks(a, b) if k < b)
+        cuts = sorted(cuts) + [b - a]
+        return list(zip(cuts[:-1], cuts[1:], strict=True))
+
+    def _after_piece(self, a: int, lo: int, hi: int, states: np.ndarray, aux: np.ndarray
+                     ) -> None:
+        """Solar management on board: account for the piece, and command at a period's
+        end (the next piece flies the new tab and offset)."""
+        m = self.manager
+        if m is None or not np.all(np.isfinite(states[hi])):
+            return   # a diverged state is _finish's to report
+        m.absorb(a + lo, states[lo:hi + 1], aux[lo:hi])
+        if a + hi in m.breaks(a + hi - 1, a + hi):
+            self.retrim(m.at_break(a + hi, states[hi], self.environment.solar))
 
     def _t(self, k: np.ndarray) -> np.ndarray:
         # Sample times rounded to the nanosecond: exact decimals (4.608, not
@@ -258,10 +296,14 @@ class TruthStream:
         states, aux = engine.allocate(n, len(self.x))
         if sense is None:
             self._fill(a, 0, n, t_s, inputs, shadow)
-            engine.run(self.x, [inputs[name] for name, _ in input_layout(n_wheels)], self.p,
-                       out=(states, aux))
+            x = self.x
+            for lo, hi in self._pieces(a, b, n):
+                engine.run(x, [inputs[name][lo:hi] for name, _ in input_layout(n_wheels)],
+                           self.p, out=(states[lo:hi + 1], aux[lo:hi]))
+                self._after_piece(a, lo, hi, states, aux)
+                x = states[hi]
             return self._finish(a, t_s, states, aux, inputs, shadow)
-        bounds = [(lo, min(lo + piece, n)) for lo in range(0, n, piece)]
+        bounds = self._pieces(a, b, piece)
         todo: queue.SimpleQueue = queue.SimpleQueue()
         done: queue.SimpleQueue = queue.SimpleQueue()
 
@@ -271,6 +313,7 @@ class TruthStream:
                 for lo, hi in iter(todo.get, None):
                     engine.run(x, [inputs[name][lo:hi] for name, _ in input_layout(n_wheels)],
                                self.p, out=(states[lo:hi + 1], aux[lo:hi]))
+                    self._after_piece(a, lo, hi, states, aux)
                     x = states[hi]
                     if not np.all(np.isfinite(x)):
                         states[hi + 1:] = np.nan    # _finish says where it went
@@ -318,7 +361,8 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
                    wheel_torque: np.ndarray | None = None,
                    model: TruthModel | None = None,
                    disturbance: Disturbance | None = None,
-                   disturbance_rng: np.random.Generator | None = None) -> TruthResult:
+                   disturbance_rng: np.random.Generator | None = None,
+                   managed: bool = False) -> TruthResult:
     """Simulate the nonlinear truth on ``t = 0, dt, …`` up to ``duration_s``.
 
     ``rng`` supplies the wheel ripple; it is required when ripple is enabled so
@@ -331,5 +375,5 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
     """
     stream = TruthStream(spacecraft, orbit, environment, control, initial, epoch, duration_s,
                          dt_s, rng, extra_torque, wheel_torque, model, disturbance,
-                         disturbance_rng)
+                         disturbance_rng, managed)
     return stream.window(0, stream.n_samples)

@@ -83,7 +83,9 @@ def build_environment(s: Scenario) -> environment.Environment:
         environment.GravityGradient(e.gravity_gradient.enabled),
         environment.SolarTorque(e.solar.enabled, e.solar.untrimmed_torque_Nm,
                                 e.solar.tab_effectiveness_Nm_per_deg, e.solar.trim_tab_deg,
-                                e.solar.lever_axis),
+                                e.solar.lever_axis, e.solar.array_offset_deg,
+                                e.solar.offset_effectiveness_Nm_per_deg,
+                                e.solar.untrimmed_offset_torque_Nm),
         environment.MagneticTorque(e.magnetic.enabled, e.magnetic.residual_dipole_Am2,
                                    e.magnetic.profile_amplitude_Am2,
                                    e.magnetic.profile_period_s,
@@ -102,7 +104,9 @@ def build_disturbance(s: Scenario) -> disturbance.Disturbance:
 
 
 def build_control(s: Scenario) -> control.Control:
-    return control.Control(**s.control.model_dump())
+    mag = s.momentum_management.magnetic
+    return control.Control(**s.control.model_dump(), momentum_direction_gain_per_s=(
+        mag.gain_per_s if mag.enabled else 0.0))
 
 
 def build_initial(s: Scenario) -> InitialState:
@@ -167,11 +171,14 @@ def truth_stream(s: Scenario, rng: np.random.Generator, duration_s: float | None
     ripple drawn from ``rng`` and its disturbance, if it flies one, from
     ``disturbance_rng`` (``disturbance_generator(s, run)``: required then); ``duration_s``
     and ``dt_s`` default to the scenario's."""
+    mm = s.momentum_management
+    solar = mm.solar.law() if mm.solar.enabled else None
     return TruthStream(build_spacecraft(s), orbit(s), build_environment(s), build_control(s),
                        build_initial(s), epoch(s),
                        s.duration_s if duration_s is None else duration_s,
                        s.sample_interval_s if dt_s is None else dt_s, rng=rng, model=model,
-                       disturbance=build_disturbance(s), disturbance_rng=disturbance_rng)
+                       disturbance=build_disturbance(s), disturbance_rng=disturbance_rng,
+                       managed=s.momentum_management.on(), solar_management=solar)
 
 
 def bias_model(s: Scenario):

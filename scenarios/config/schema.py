@@ -20,6 +20,7 @@ from .. import __version__
 from ..units import DAY_S
 from .batch import Batch
 from .estimation import DEFAULT_OUTPUT_INTERVAL_S, TELEMETRY_AUTO_MAX_S, Estimator, Output, Trim
+from .management import MomentumManagement
 from .montecarlo import MonteCarlo, check_dispersion
 from .report import Report
 from .sections import (
@@ -87,6 +88,7 @@ class Scenario(_Section):
     montecarlo: MonteCarlo = Field(default_factory=MonteCarlo)
     output: Output = Field(default_factory=Output)
     trim: Trim = Field(default_factory=Trim)
+    momentum_management: MomentumManagement = Field(default_factory=MomentumManagement)
     telemetry: Telemetry = Field(default_factory=Telemetry)
     batch: Batch = Field(default_factory=Batch)
     report: Report = Field(default_factory=Report)
@@ -134,6 +136,9 @@ class Scenario(_Section):
         if every is not None and every * DAY_S >= self.duration_s:
             problems.append(f"trim.every_days: {every} days is not shorter than the run "
                             f"({self.duration_s / DAY_S:g} days): the tab would never move")
+        if every is not None and self.momentum_management.solar.enabled:
+            problems.append("trim.every_days: the trim loop and momentum_management.solar both "
+                            "move the tab; use one")
         if self.batch.overlap_h >= self.batch.span_h:
             problems.append(f"batch.overlap_h: {self.batch.overlap_h:g} h must be shorter than "
                             f"batch.span_h ({self.batch.span_h:g} h)")

@@ -119,6 +119,15 @@ class Solar(_Section):
     lever_axis: Vec3 = Field(_SOLAR.lever_axis,
                              description="array-to-sail centre-of-pressure direction, a unit "
                              "vector in body axes (-)")
+    array_offset_deg: float = Field(_SOLAR.array_offset_deg,
+                                    description="solar array offset from Sun-normal, the "
+                                    "second actuator: torque κ_o ŝ⊥ with κ_o = untrimmed_offset "
+                                    "− offset_effectiveness · offset (docs/conventions.md) (deg)")
+    offset_effectiveness_Nm_per_deg: float = Field(
+        _SOLAR.offset_effectiveness_Nm_per_deg, description="dκ_o/d(offset) (N m/deg)")
+    untrimmed_offset_torque_Nm: float = Field(
+        _SOLAR.untrimmed_offset_torque_Nm, description="imbalance κ_o along the in-plane Sun "
+        "direction ŝ⊥ with the array Sun-normal; 0 in the paper's model (N m)")
 
     @field_validator("lever_axis")
     @classmethod

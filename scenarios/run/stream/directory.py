@@ -27,7 +27,7 @@ from ...workers import blas_one_thread
 from ..filtering import design_of, filter_section
 from .engine import Engine
 from .process import producer_process
-from .producer import producer
+from .producer import MANAGEMENT_FILE, producer
 from .windows import windows_of
 
 LOG_EVERY_DAYS = 10
@@ -110,6 +110,8 @@ def stream_to_directory(s: Scenario, stage: Path, run: int = 0,
         for name, (figs, _) in engine.extra.items():
             summary[name] = figs.summary()
         summary["pitch"] = engine.pitch.summary()
+        if s.momentum_management.on():
+            summary["momentum_management"] = s.momentum_management.summary(MANAGEMENT_FILE)
         if steering is not None:
             summary.update(steering.summary(stage))
         write_summary(stage / "summary.json", add_checks(summary))

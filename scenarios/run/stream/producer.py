@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+import numpy as np
 from dynprop.estimator.linear.transition import discretize
 from dynprop.sim.telemetry import sense_window
 
@@ -37,6 +38,8 @@ from ...samples import output_rows
 from ...units import DEG
 from .plan import make_plan
 from .twin_filter import TwinFilter, TwinTelemetry
+
+MANAGEMENT_FILE = "momentum_management.csv"   # solar management's daily commands
 
 
 class Steering(Protocol):
@@ -80,6 +83,9 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 tags=UtcTags.of(s.epoch_utc, s.sample_interval_s))
     twin_filter = TwinFilter(s, params, disc, plan)
     loop = None if steering is None else steering.start(s, stream, out)
+    if out is not None and stream.manager is not None:
+        files["management"] = CsvAppender(Path(out) / MANAGEMENT_FILE)
+    logged = 0    # solar management's commands already in its file
     pending: _TwinPending | None = None
     twin_x = None
     unwritten: list = []     # file rows of windows whose twin is not yet handed on
@@ -106,6 +112,11 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 tel_cols = telemetry_columns(tel, suite)
                 if loop is not None:   # may move the truth's tab for the next window
                     loop.add(truth, tel_cols, plan.is_last(index))
+                if "management" in files and len(stream.manager.history) > logged:
+                    new = stream.manager.history[logged:]
+                    files["management"].append({k: np.array([r[k] for r in new])
+                                                for k in new[0]})
+                    logged = len(stream.manager.history)
                 unwritten.append((index, truth_columns(truth, tel.sun_visible, rows),
                                   tel_cols))
                 real = TruthWindow(
