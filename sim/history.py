@@ -14,16 +14,18 @@ from .step import split_aux
 
 # TruthResult.torques's sources, in truth.csv's column order.  Those of
 # OPTIONAL_TORQUES are there only in runs that fly them: the disturbance
-# (``sim.disturbance``) only when a scenario has one, so a run without it records and
-# writes what it always did.
+# (``sim.disturbance``) only when a scenario has one, the thrusters (``sim.events``) only
+# when it has thruster events, so a run without them records and writes what it always
+# did.
 TORQUE_SOURCES = ("gravity_gradient", "solar", "magnetic", "magnetic_control", "wheel_control",
-                  "wheel_input", "wheel_ripple", "external", "disturbance")
-OPTIONAL_TORQUES = ("disturbance",)
+                  "wheel_input", "wheel_ripple", "external", "disturbance", "thruster")
+OPTIONAL_TORQUES = ("disturbance", "thruster")
 # The sources acting on the spacecraft from outside, besides the gravity gradient
 # (which the paper's linear model carries in F): the torques its Eq. 9 stands for
 # (the disturbance too, which the model meets only as process noise), summed in
 # this order.
-EXTERNAL_TORQUES = ("solar", "magnetic", "magnetic_control", "external", "disturbance")
+EXTERNAL_TORQUES = ("solar", "magnetic", "magnetic_control", "external", "disturbance",
+                    "thruster")
 
 class Euler312:
     """yaw, roll and pitch (rad) of a history holding ``euler_rad`` (N, 3): the 3-1-2
@@ -52,9 +54,9 @@ class TruthResult(Euler312):
     gravity_gradient, solar, magnetic (residual and prescribed dipoles),
     magnetic_control (the torquers), wheel_control (the reaction of the control's
     motor torques on the body), wheel_input (of ``wheel_torque``), wheel_ripple,
-    external (the caller's ``extra_torque``) and, in runs that fly one, disturbance
-    (``sim.disturbance``).  Torques are evaluated at each sample, the start of its
-    step; external and disturbance are held over it.
+    external (the caller's ``extra_torque``) and, in runs that fly them, disturbance
+    (``sim.disturbance``) and thruster (``sim.events``).  Torques are evaluated at each
+    sample, the start of its step; external, disturbance and thruster are held over it.
     """
 
     t_s: np.ndarray
@@ -151,12 +153,13 @@ def truth_result(t_s, states, aux, inputs, shadow, spacecraft, backend) -> Truth
     a = split_aux(aux, n)
     x = states[:-1]
     axes = spacecraft.wheel_axes
-    # With a disturbance the step's n_ext is the caller's torque plus it, each kept
-    # apart (``TruthStream._window_inputs``); without one n_ext is the caller's alone.
+    # With a disturbance or thrusters the step's n_ext is the caller's torque plus
+    # them, each kept apart (``TruthStream._window_inputs``); without, the caller's alone.
     ready = {"gravity_gradient": a["t_gg"], "solar": a["t_solar"], "magnetic": a["t_mag"],
              "magnetic_control": a["t_mtq"], "external": inputs.get("external", inputs["n_ext"])}
-    if "disturbance" in inputs:
-        ready["disturbance"] = inputs["disturbance"]
+    for optional in OPTIONAL_TORQUES:
+        if optional in inputs:
+            ready[optional] = inputs[optional]
     reactions = {"wheel_control": a["u_cmd"], "wheel_input": inputs["u_wheel"],
                  "wheel_ripple": inputs["ripple"]}
     order = tuple(k for k in TORQUE_SOURCES if k in ready or k in reactions)

@@ -27,6 +27,7 @@ from . import ephemeris
 from .control import Control
 from .disturbance import Disturbance, DisturbanceDraw
 from .environment import Environment
+from .events import Schedule
 from .frames import GeoOrbit, dcm_from_quat, quat_from_euler312
 from .history import TruthResult, truth_result
 from .momentum import SolarManagement, SolarManager
@@ -37,6 +38,8 @@ from .sun_inputs import near_shadow, profiled, shadow_fine, step_inputs, sun_nod
 DEFAULT_CHUNK = 4096
 TAIL_CHUNK = 256  # a short run's or a long run's last steps, without 4096-step padding
 SENSE_PIECE = 4 * DEFAULT_CHUNK   # samples per sensing call while the rollout runs
+# The solar torque's setting each command kind of ``sim.events`` moves.
+COMMAND_FIELDS = {"trim_tab": "trim_tab_deg", "array_offset": "array_offset_deg"}
 
 
 @dataclass(frozen=True)
@@ -115,7 +118,12 @@ class TruthStream:
     nodes (every 128 samples from the start, unwrapped over the run) and the
     shadow's coarse pass (every 64 samples from the start, its padding from the
     run's first interval).  Everything else is per sample.  Memory is the window's,
-    whatever the run's length (the run's Sun nodes: 32 bytes per 128 samples)."""
+    whatever the run's length (the run's Sun nodes: 32 bytes per 128 samples).
+
+    A ``schedule`` (``sim.events``) adds its thruster torques to the step's external
+    torque, recorded as the source ``thruster``, and flies its trim_tab and
+    array_offset commands from their sample on: the rollout is split there and the
+    parameters re-packed, as ``retrim`` does between windows."""
 
     def __init__(self, spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environment,
                  control: Control, initial: InitialState, epoch: datetime, duration_s: float,
@@ -124,7 +132,8 @@ class TruthStream:
                  wheel_torque: np.ndarray | None = None, model: TruthModel | None = None,
                  disturbance: Disturbance | None = None,
                  disturbance_rng: np.random.Generator | None = None,
-                 managed: bool = False, solar_management: SolarManagement | None = None):
+                 managed: bool = False, solar_management: SolarManagement | None = None,
+                 schedule: Schedule | None = None):
         if not (np.isfinite(duration_s) and duration_s >= 0):
             raise ValueError("duration_s must be finite and non-negative")
         if not (np.isfinite(dt_s) and dt_s > 0):
@@ -146,9 +155,12 @@ class TruthStream:
             if disturbance_rng is None:
                 raise ValueError("a disturbance_rng is required when a disturbance is flown")
             self.disturbance_draw = DisturbanceDraw(disturbance, dt_s, disturbance_rng)
+        self.schedule = schedule if schedule is not None else Schedule()
         # The managed step (``sim.step``) only where it is needed, or asked for by a run
-        # that will need it later (momentum management moving the array offset).
-        self.managed = managed or is_managed(environment, control)
+        # that will need it later (momentum management or a command moving the array
+        # offset).
+        self.managed = managed or is_managed(environment, control) \
+            or bool(self.schedule.of_kind("array_offset"))
         self.p = pack_params(spacecraft, orbit, environment, control, dt_s, self.managed)
         self.model = model or truth_model(nw, DEFAULT_CHUNK, requested_backend(), self.managed)
         if self.model.managed != self.managed:
@@ -165,6 +177,32 @@ class TruthStream:
                                  "managed step (managed=True)")
             self.manager = SolarManager(solar_management, spacecraft, orbit, self.gmst0, dt_s,
                                         self.sun_nodes, aux_slice(nw, "t_mtq"), self.x)
+        self.thrusters = bool(self.schedule.of_kind("thruster"))
+        self.commands = self._command_samples()
+
+    def _command_samples(self) -> dict[int, list]:
+        """The commands of the schedule by the sample they apply from, the first with
+        t_k ≥ t (``sim.events``): the step from it on flies the new setting."""
+        out: dict[int, list] = {}
+        for e in self.schedule.commands(-np.inf, np.inf):
+            if e.kind not in COMMAND_FIELDS:
+                raise ValueError(f"{e.kind} events are not flown by the truth")
+            field = COMMAND_FIELDS[e.kind]
+            if field not in {f.name for f in dataclasses.fields(self.environment.solar)}:
+                raise ValueError(f"{e.kind} events need the solar torque's {field}")
+            k = max(0, int(np.ceil(e.t_s / self.dt_s)) - 1)
+            while self._t(k) < e.t_s:     # exact against the samples' own times
+                k += 1
+            if k < self.n_samples:
+                out.setdefault(k, []).append(e)
+        return out
+
+    def _command(self, k: int) -> None:
+        """Fly the commands that apply from sample ``k``, before the piece from it rolls
+        out (the parameters re-packed, as ``retrim`` does)."""
+        for e in self.commands.get(k, ()):
+            self.retrim(dataclasses.replace(self.environment.solar,
+                                            **{COMMAND_FIELDS[e.kind]: float(e.angle_deg)}))
 
     def retrim(self, solar) -> None:
         """Fly ``solar`` (a new trim-tab setting) from the next window on: the ground
@@ -179,6 +217,7 @@ class TruthStream:
         cuts = set(range(0, b - a, piece))
         if self.manager is not None:
             cuts.update(k - a for k in self.manager.breaks(a, b) if k < b)
+        cuts.update(k - a for k in self.commands if a <= k < b)
         cuts = sorted(cuts) + [b - a]
         return list(zip(cuts[:-1], cuts[1:], strict=True))
 
@@ -226,6 +265,8 @@ class TruthStream:
         apart (``history.truth_result``); without one, ``n_ext`` is the caller's."""
         n, nw = b - a, self.spacecraft.n_wheels
         external = np.zeros((n, 3)) if self.extra_torque is None else self.extra_torque[a:b]
+        if self.thrusters:
+            return self._thruster_inputs(a, b, external)
         inputs = {"sun_r": np.empty((n, 3)), "sun_scale": np.empty(n),
                   "m_prof": np.empty((n, 3)) if profiled(self.environment)
                   else np.zeros((n, 3)),
@@ -238,6 +279,25 @@ class TruthStream:
             # The step's n_ext: the disturbance itself, or the caller's torque plus it.
             inputs["n_ext"] = inputs["disturbance"] if self.extra_torque is None \
                 else np.empty((n, 3))
+        return inputs, np.empty(n)
+
+    def _thruster_inputs(self, a: int, b: int, external: np.ndarray
+                         ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """``_window_inputs`` of a run with thruster events: their torque kept as a
+        source of its own (``thruster``) beside the caller's and the disturbance, the
+        step's ``n_ext`` their sum (the disturbance's share added in ``_fill``)."""
+        n, nw = b - a, self.spacecraft.n_wheels
+        thruster = self.schedule.thruster_torque(self._t(np.arange(a, b)))
+        inputs = {"sun_r": np.empty((n, 3)), "sun_scale": np.empty(n),
+                  "m_prof": np.empty((n, 3)) if profiled(self.environment)
+                  else np.zeros((n, 3)),
+                  "n_ext": external + thruster,
+                  "u_wheel": np.zeros((n, nw)) if self.wheel_torque is None
+                  else self.wheel_torque[a:b],
+                  "ripple": np.empty((n, nw)) if self.sigma > 0 else np.zeros((n, nw)),
+                  "external": external, "thruster": thruster}
+        if self.disturbance_draw is not None:
+            inputs["disturbance"] = np.empty((n, 3))
         return inputs, np.empty(n)
 
     def _fill(self, a: int, lo: int, hi: int, t_s: np.ndarray, inputs: dict[str, np.ndarray],
@@ -261,7 +321,9 @@ class TruthStream:
         if self.disturbance_draw is not None:
             rows = inputs["disturbance"][cut]
             self.disturbance_draw.fill(rows)
-            if self.extra_torque is not None:
+            if "thruster" in inputs:
+                inputs["n_ext"][cut] += rows
+            elif self.extra_torque is not None:
                 np.add(inputs["external"][cut], rows, out=inputs["n_ext"][cut])
 
     def sun(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -298,6 +360,7 @@ class TruthStream:
             self._fill(a, 0, n, t_s, inputs, shadow)
             x = self.x
             for lo, hi in self._pieces(a, b, n):
+                self._command(a + lo)
                 engine.run(x, [inputs[name][lo:hi] for name, _ in input_layout(n_wheels)],
                            self.p, out=(states[lo:hi + 1], aux[lo:hi]))
                 self._after_piece(a, lo, hi, states, aux)
@@ -311,6 +374,7 @@ class TruthStream:
             x = self.x
             try:
                 for lo, hi in iter(todo.get, None):
+                    self._command(a + lo)
                     engine.run(x, [inputs[name][lo:hi] for name, _ in input_layout(n_wheels)],
                                self.p, out=(states[lo:hi + 1], aux[lo:hi]))
                     self._after_piece(a, lo, hi, states, aux)
@@ -362,7 +426,7 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
                    model: TruthModel | None = None,
                    disturbance: Disturbance | None = None,
                    disturbance_rng: np.random.Generator | None = None,
-                   managed: bool = False) -> TruthResult:
+                   managed: bool = False, schedule: Schedule | None = None) -> TruthResult:
     """Simulate the nonlinear truth on ``t = 0, dt, …`` up to ``duration_s``.
 
     ``rng`` supplies the wheel ripple; it is required when ripple is enabled so
@@ -370,10 +434,11 @@ def simulate_truth(spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environ
     (N, 3) adds a body torque and ``wheel_torque`` (N, n_wheels) adds motor torques
     to the control's, each held over its step.  ``disturbance`` (``sim.disturbance``)
     adds its random body torque, drawn from ``disturbance_rng`` (required when its
-    kind is not none) and held over each step too.  ``final_state`` is the state one
+    kind is not none) and held over each step too.  ``schedule`` (``sim.events``) adds
+    its thruster torques and flies its commands.  ``final_state`` is the state one
     step after the last sample (the step that produced the last sample's outputs).
     """
     stream = TruthStream(spacecraft, orbit, environment, control, initial, epoch, duration_s,
                          dt_s, rng, extra_torque, wheel_torque, model, disturbance,
-                         disturbance_rng, managed)
+                         disturbance_rng, managed, schedule=schedule)
     return stream.window(0, stream.n_samples)
