@@ -9,10 +9,12 @@ from datetime import datetime
 import numpy as np
 from dynprop.estimator.linear.model import ModelParams, ProcessNoise
 from dynprop.sim import control, disturbance, environment, ephemeris, sensors, spacecraft
+from dynprop.sim.events import Schedule
 from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.truth import InitialState, TruthStream
 
 from ..units import DEG
+from . import events
 from .schema import Scenario
 from .sections import SunHead
 
@@ -169,8 +171,8 @@ def truth_stream(s: Scenario, rng: np.random.Generator, duration_s: float | None
                  disturbance_rng: np.random.Generator | None = None) -> TruthStream:
     """The truth of ``s`` as a stream of windows (``sim.truth.TruthStream``), its wheel
     ripple drawn from ``rng`` and its disturbance, if it flies one, from
-    ``disturbance_rng`` (``disturbance_generator(s, run)``: required then); ``duration_s``
-    and ``dt_s`` default to the scenario's."""
+    ``disturbance_rng`` (``disturbance_generator(s, run)``: required then), flying its
+    events (``build_schedule``); ``duration_s`` and ``dt_s`` default to the scenario's."""
     mm = s.momentum_management
     solar = mm.solar.law() if mm.solar.enabled else None
     return TruthStream(build_spacecraft(s), orbit(s), build_environment(s), build_control(s),
@@ -178,7 +180,14 @@ def truth_stream(s: Scenario, rng: np.random.Generator, duration_s: float | None
                        s.duration_s if duration_s is None else duration_s,
                        s.sample_interval_s if dt_s is None else dt_s, rng=rng, model=model,
                        disturbance=build_disturbance(s), disturbance_rng=disturbance_rng,
-                       managed=s.momentum_management.on(), solar_management=solar)
+                       managed=s.momentum_management.on(), solar_management=solar,
+                       schedule=build_schedule(s))
+
+
+def build_schedule(s: Scenario) -> Schedule:
+    """The scenario's ``events``, every occurrence of each (``sim.events.Schedule``;
+    empty without any)."""
+    return events.schedule(s)
 
 
 def bias_model(s: Scenario):

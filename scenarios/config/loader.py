@@ -8,6 +8,7 @@ closest valid key.  The CLI prints them before exiting with status 2.
 from __future__ import annotations
 
 import re
+import types
 import typing
 from dataclasses import dataclass, field
 from importlib import resources
@@ -164,6 +165,11 @@ def _model_at(loc: tuple) -> type[BaseModel] | None:
                 or part not in model.model_fields:
             return None
         model = model.model_fields[part].annotation
+        if typing.get_origin(model) is typing.Annotated:
+            model = typing.get_args(model)[0]
+        if typing.get_origin(model) is tuple and parts and isinstance(parts[0], int):
+            parts.pop(0)  # an entry of a list of sections (events[3])
+            model = typing.get_args(model)[0]
         if typing.get_origin(model) is dict:
             if not parts:
                 return None
@@ -208,6 +214,12 @@ def key_lines(text: str) -> dict[tuple, int]:
                 if isinstance(key, yaml.ScalarNode):
                     lines.setdefault(prefix + (key.value,), key.start_mark.line + 1)
                     walk(value, prefix + (key.value,))
+        elif isinstance(node, yaml.SequenceNode):
+            # The entries of a list of sections (events), by index.
+            for i, item in enumerate(node.value):
+                if isinstance(item, yaml.MappingNode):
+                    lines.setdefault(prefix + (i,), item.start_mark.line + 1)
+                    walk(item, prefix + (i,))
     walk(root, ())
     return lines
 
@@ -215,6 +227,9 @@ def key_lines(text: str) -> dict[tuple, int]:
 def _value_at(raw, keys: tuple):
     node = raw
     for key in keys:
+        if isinstance(node, list) and isinstance(key, int) and 0 <= key < len(node):
+            node = node[key]
+            continue
         if not isinstance(node, dict) or key not in node:
             return _ABSENT
         node = node[key]
@@ -228,9 +243,15 @@ def _shape(annotation) -> str | None:
     """A vector or matrix field's shape in the user's words ("a list of 3 numbers")."""
     if typing.get_origin(annotation) is typing.Annotated:
         annotation = typing.get_args(annotation)[0]
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        # An optional vector (an event's torque_Nm): the vector's shape.
+        inner = [a for a in typing.get_args(annotation) if a is not type(None)]
+        return _shape(inner[0]) if len(inner) == 1 else None
     if typing.get_origin(annotation) is not tuple:
         return None
     args = typing.get_args(annotation)
+    if Ellipsis in args:      # a list of any length (events), not a vector
+        return None
     inner = _shape(args[0])
     if inner is None:
         return f"a list of {len(args)} numbers"
@@ -321,9 +342,13 @@ def problem_lines(exc: ValidationError, raw: dict | None = None,
         # the user wrote; a union gives one error per alternative, keep the first.
         in_union = any(_union_label(p) and p not in DISTRIBUTION_TAGS for p in error["loc"])
         loc = tuple(p for p in error["loc"] if not _union_label(p))
-        first_int = next((i for i, p in enumerate(loc) if isinstance(p, int)), len(loc))
+        # The key path runs to the last key; indices after it are a value's elements
+        # (a vector's [1]), those before it entries of a list of sections (events[3]).
+        last_key = max((i for i, p in enumerate(loc) if not isinstance(p, int)), default=-1)
+        first_int = next((i for i, p in enumerate(loc) if isinstance(p, int)
+                          and i > last_key), len(loc))
         keys = loc[:first_int]
-        where = ".".join(str(p) for p in keys)
+        where = key_path(keys)
         index = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc[first_int:])
         msg, echo = _message(error, keys, in_union)
         if not where:
@@ -348,6 +373,11 @@ def problem_lines(exc: ValidationError, raw: dict | None = None,
     return out
 
 
+def key_path(keys: tuple) -> str:
+    """A key path as messages name it: ``sensors.earth.noise_deg``, ``events[3].kind``."""
+    return "".join(f"[{k}]" if isinstance(k, int) else f".{k}" for k in keys).lstrip(".")
+
+
 def _tail(keys: tuple, echo: bool, raw, error: dict, sources: Sources | None) -> str:
     """", got VALUE (FILE:LINE)": the value as given and where it came from (a
     ``--set`` of this very key shows the value itself)."""
@@ -357,7 +387,8 @@ def _tail(keys: tuple, echo: bool, raw, error: dict, sources: Sources | None) ->
         value = error["input"]
     if error["type"] == "union_tag_invalid":
         value = (error.get("ctx") or {}).get("tag", value)
-    exact_set = source is not None and source.startswith(f"--set {'.'.join(keys)}=")
+    exact_set = source is not None and source.startswith(
+        f"--set {'.'.join(map(str, keys))}=")
     # An option of its own (--duration-s 600) shows the value as given, as --set does.
     own_option = source is not None and source.startswith("--") and not source.startswith(
         "--set ")

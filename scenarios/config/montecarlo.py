@@ -9,6 +9,9 @@ whose parameters are *offsets from the nominal value*, in the key's own unit:
           {distribution: normal, sigma: [[67, 10, 10], [10, 19, 10], [10, 10, 69]]}
         initial_state.yaw_deg: {distribution: normal, sigma: 0.5}
         epoch_utc: {distribution: uniform, low: -10, high: 10}     # whole days
+        events.0.time_s: {distribution: normal, sigma: 600}         # the first event's
+
+A list's entries are addressed by their index (``events.0.torque_Nm``).
 
 Parameters are a number (every component gets it) or have the key's shape.
 3×3 keys (the inertia tensor) are drawn symmetric: the upper triangle is drawn and

@@ -58,6 +58,8 @@ The type column gives the range the schema enforces, if any.
 REQUIRED = "(required)"
 # A dispersion-style mapping's user-chosen key, as shown in key paths.
 ENTRY_KEY = "<key>"
+# An entry of a list of sections (``events``), as shown in key paths.
+ENTRY_INDEX = "<i>"
 
 
 @dataclass(frozen=True)
@@ -133,8 +135,21 @@ def _variants(annotation) -> tuple[str, tuple[type[BaseModel], ...]] | None:
     return tags[0], models
 
 
+def _list_of(annotation) -> type[BaseModel] | None:
+    """The section of each entry if ``annotation`` is a list of sections (``events``)."""
+    if typing.get_origin(annotation) is typing.Annotated:
+        annotation = typing.get_args(annotation)[0]
+    args = typing.get_args(annotation)
+    if typing.get_origin(annotation) is tuple and len(args) == 2 and args[1] is Ellipsis \
+            and _is_model(args[0]):
+        return args[0]
+    return None
+
+
 def _type_name(annotation) -> str:
     origin = typing.get_origin(annotation)
+    if _list_of(annotation):
+        return "list of entries (below)"
     if origin is typing.Annotated:
         return _type_name(typing.get_args(annotation)[0])
     if origin is typing.Literal:
@@ -237,6 +252,11 @@ def required_paths() -> set[str]:
                 parts = [str(p) for p in loc if p != kind]
                 if ".".join(parts).startswith(f"{prefix}.{ENTRY_KEY}."):
                     paths.add(".".join(parts))
+    for name, f in Scenario.model_fields.items():
+        if _list_of(f.annotation):
+            # An empty entry: the keys every entry must give.
+            paths |= {".".join(ENTRY_INDEX if isinstance(p, int) else str(p) for p in loc)
+                      for loc in _missing({name: [{}]}) if loc[:2] == (name, 0)}
     return paths
 
 
@@ -281,11 +301,21 @@ def _walk(model: BaseModel, field: FieldInfo | None, prefix: str, required: set[
         keys.append(Key(path, _type_cell(f), default, _description(f)))
         if _variants(f.annotation):
             entries.append((path, *_variants(f.annotation)))
+        if _list_of(f.annotation):
+            entries.append((path, None, (_list_of(f.annotation),)))
     intro = _intro(type(model), field)
     if keys or intro:
         title = f"`{prefix.rstrip('.')}`" if prefix else "Top level"
         out.append(Section(prefix.rstrip("."), title, intro, tuple(keys)))
     for path, tag, models in entries:
+        if tag is None:       # a list's entries
+            (m,) = models
+            base = f"{path}.{ENTRY_INDEX}."
+            rows = tuple(Key(f"{base}{n}", _type_cell(f), REQUIRED if f"{base}{n}" in required
+                             else yaml_text(f.get_default(call_default_factory=True)),
+                             _description(f)) for n, f in m.model_fields.items())
+            out.append(Section(f"{path}.{ENTRY_INDEX}", f"`{path}` entries", _intro(m), rows))
+            continue
         for m in models:
             kind = _tag_value(m, tag)
             base = f"{path}.{ENTRY_KEY}."
@@ -312,12 +342,14 @@ def sections() -> list[Section]:
 def _header(all_sections: list[Section]) -> str:
     plain = [k.path for s in all_sections for k in s.keys
              if k.default == REQUIRED and ENTRY_KEY not in k.path]
+    plain = [p for p in plain if ENTRY_INDEX not in p]
     entry = sorted({s.path for s in all_sections for k in s.keys
-                    if k.default == REQUIRED and ENTRY_KEY in k.path})
+                    if k.default == REQUIRED and (ENTRY_KEY in k.path or ENTRY_INDEX in k.path)})
     text = "Every key is optional except " + ", ".join(f"`{p}`" for p in plain)
     if entry:
         text += ", and the keys marked " + REQUIRED + " in each entry of " + \
-            ", ".join(f"`{p.removesuffix('.' + ENTRY_KEY)}`" for p in entry)
+            ", ".join(f"`{p.removesuffix('.' + ENTRY_KEY).removesuffix('.' + ENTRY_INDEX)}`"
+                      for p in entry)
     return HEADER.format(required=text + ".", max_lines=MAX_PROBLEM_LINES)
 
 

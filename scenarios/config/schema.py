@@ -10,16 +10,18 @@ definitions (``python -m dynprop.scenarios.config.reference``).
 from __future__ import annotations
 
 import difflib
+from typing import Annotated
 
 import numpy as np
 import yaml
 from dynprop.sim import ephemeris
-from pydantic import BaseModel, Field, field_validator, model_validator
+from pydantic import BaseModel, Field, Strict, field_validator, model_validator
 
 from .. import __version__
 from ..units import DAY_S
 from .batch import Batch
 from .estimation import DEFAULT_OUTPUT_INTERVAL_S, TELEMETRY_AUTO_MAX_S, Estimator, Output, Trim
+from .events import EventEntry, event_problems
 from .management import MomentumManagement
 from .montecarlo import MonteCarlo, check_dispersion
 from .report import Report
@@ -92,6 +94,9 @@ class Scenario(_Section):
     telemetry: Telemetry = Field(default_factory=Telemetry)
     batch: Batch = Field(default_factory=Batch)
     report: Report = Field(default_factory=Report)
+    events: Annotated[tuple[EventEntry, ...], Strict(False)] = Field(
+        (), description="scheduled events, a list of entries (below): thruster firings, "
+        "sensor outages, trim-tab and array-offset commands")
 
     @field_validator("dynprop_version", mode="before")
     @classmethod
@@ -142,6 +147,7 @@ class Scenario(_Section):
         if self.batch.overlap_h >= self.batch.span_h:
             problems.append(f"batch.overlap_h: {self.batch.overlap_h:g} h must be shorter than "
                             f"batch.span_h ({self.batch.span_h:g} h)")
+        problems += event_problems(self)
         for key, d in self.montecarlo.dispersions.items():
             try:
                 check_dispersion(key, leaf_value(self, key), d)
@@ -156,14 +162,27 @@ def leaf_value(scenario: BaseModel, key: str):
     """The value at a dotted key path; ValueError naming it if it is not a leaf key."""
     node = scenario
     for part in key.split("."):
+        if isinstance(node, tuple) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]     # an entry of a list (events.0.time_s)
+            continue
         if not isinstance(node, BaseModel) or part not in type(node).model_fields:
-            match = difflib.get_close_matches(key, leaf_paths(type(scenario)), n=1)
+            match = difflib.get_close_matches(key, leaf_paths(type(scenario))
+                                              + _entry_paths(scenario), n=1)
             hint = f"; did you mean '{match[0]}'?" if match else ""
             raise ValueError(f"montecarlo.dispersions.{key}: no such scenario key{hint}")
         node = getattr(node, part)
     if isinstance(node, BaseModel):
         raise ValueError(f"montecarlo.dispersions.{key}: is a section, not a value")
     return node
+
+
+def _entry_paths(scenario: BaseModel) -> list[str]:
+    """The dotted key paths of the keys of each entry of a list of sections
+    (``events.0.time_s``), which ``leaf_paths`` cannot know."""
+    return [f"{name}.{i}.{key}" for name in type(scenario).model_fields
+            if isinstance(entries := getattr(scenario, name), tuple)
+            for i, entry in enumerate(entries) if isinstance(entry, BaseModel)
+            for key in type(entry).model_fields]
 
 
 def leaf_paths(model: type[BaseModel], prefix: str = "") -> list[str]:
@@ -189,10 +208,11 @@ _LATER_KEYS = (*((("sensors", *head), key, default) for head in
 def resolved_yaml(scenario: Scenario) -> str:
     """Every key with its value, defaults filled, stamped with this version; loads
     back to the same scenario.  The exceptions: ``environment.disturbance``,
-    ``telemetry``, ``batch``, ``report``, ``estimator.bias_states`` and the outlier keys
-    (``_LATER_KEYS``) are written only when they differ from their defaults, so that a
-    scenario without them resolves to the very text it did before they existed (its run
-    directories, and the digest that resumes a Monte Carlo set, unchanged)."""
+    ``telemetry``, ``batch``, ``report``, ``events`` (each entry with its own keys
+    only), ``estimator.bias_states`` and the outlier keys (``_LATER_KEYS``) are written
+    only when they differ from their defaults, so that a scenario without them
+    resolves to the very text it did before they existed (its run directories, and
+    the digest that resumes a Monte Carlo set, unchanged)."""
     data = scenario.model_dump(mode="json")
     if scenario.environment.disturbance == Disturbance():
         del data["environment"]["disturbance"]
@@ -202,6 +222,12 @@ def resolved_yaml(scenario: Scenario) -> str:
         del data["batch"]
     if scenario.report == Report():
         del data["report"]
+    if scenario.events:
+        # Each entry as written: its kind's keys, not every kind's nulls.
+        data["events"] = [{k: v for k, v in e.items() if v is not None}
+                          for e in data["events"]]
+    else:
+        del data["events"]
     if scenario.estimator.bias_states == type(scenario.estimator.bias_states)():
         del data["estimator"]["bias_states"]
     for where, key, default in _LATER_KEYS:

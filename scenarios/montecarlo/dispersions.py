@@ -50,10 +50,15 @@ def _offsets_flat(d, params, size, rng) -> np.ndarray:
     return low + (high - low) * rng.random(size)
 
 
+def _step(node, part: str):
+    # A list's entries are addressed by index: events.0.time_s.
+    return node[int(part)] if isinstance(node, list) else node[part]
+
+
 def _get(raw: dict, key: str):
     node = raw
     for part in key.split("."):
-        node = node[part]
+        node = _step(node, part)
     return node
 
 
@@ -61,7 +66,7 @@ def _set(raw: dict, key: str, value) -> None:
     parts = key.split(".")
     node = raw
     for part in parts[:-1]:
-        node = node[part]
+        node = _step(node, part)
     node[parts[-1]] = value
 
 

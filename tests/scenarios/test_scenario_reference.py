@@ -22,6 +22,7 @@ import pytest
 from pydantic import BaseModel
 
 from scenarios.config import reference
+from scenarios.config.events import EventEntry
 from scenarios.config.loader import ScenarioError, load_scenario, validate
 from scenarios.config.montecarlo import Normal, Uniform
 from scenarios.config.schema import Scenario, leaf_paths
@@ -33,6 +34,14 @@ ENTRY_KEY = "initial_state.yaw_deg"  # a dispersible key, standing in for <key>
 # The smallest valid entry of each kind, and the model documented for it.
 ENTRY_KINDS = {"normal": ({"distribution": "normal", "sigma": "0.1"}, Normal),
                "uniform": ({"distribution": "uniform", "low": "-0.1", "high": "0.1"}, Uniform)}
+# Rows of the `events` entries' section (kind "event"): an entry at `<i>`, written as the
+# smallest valid entry of a kind that does not use the row's key.
+INDEX = "<i>"
+EVENT_ENTRIES = {"time_s": {"kind": "trim_tab", "time_utc": "2026-03-20T12:00:00Z",
+                            "angle_deg": "1"},
+                 "angle_deg": {"kind": "sensor_outage", "time_s": "0", "duration_s": "1",
+                               "sensor": "sun"}}
+EVENT_ENTRY = {"kind": "trim_tab", "time_s": "0", "angle_deg": "1"}
 
 
 @dataclass(frozen=True)
@@ -62,7 +71,7 @@ def parse(text: str) -> tuple[list[Heading], list[Row]]:
         if line.startswith("## "):
             title, intro = line[3:], []
             m = re.search(r"`distribution: (\w+)`", title)
-            kind = m.group(1) if m else None
+            kind = m.group(1) if m else "event" if title == "`events` entries" else None
             headings.append(Heading(title, ""))
         elif title is None:
             continue
@@ -114,6 +123,8 @@ def test_every_schema_key_has_one_row(doc):
     _, rows = doc
     plain = [r.path for r in rows if r.kind is None]
     assert sorted(plain) == sorted(leaf_paths(Scenario))
+    assert [r.path for r in rows if r.kind == "event"] == \
+        [f"events.{INDEX}.{name}" for name in EventEntry.model_fields]
     for kind, (_, model) in ENTRY_KINDS.items():
         assert [r.path for r in rows if r.kind == kind] == \
             [f"montecarlo.dispersions.{ENTRY}.{name}" for name in model.model_fields]
@@ -128,7 +139,7 @@ def test_only_name_and_dispersion_entry_parameters_are_required(doc):
     _, rows = doc
     required = {(r.path, r.kind) for r in rows if r.default is None}
     e = f"montecarlo.dispersions.{ENTRY}."
-    assert required == {("name", None),
+    assert required == {("name", None), (f"events.{INDEX}.kind", "event"),
                         (e + "distribution", "normal"), (e + "sigma", "normal"),
                         (e + "distribution", "uniform"), (e + "low", "uniform"),
                         (e + "high", "uniform")}
@@ -138,6 +149,14 @@ def test_only_name_and_dispersion_entry_parameters_are_required(doc):
 def _yaml(path: str, value: str | None, kind: str | None) -> str:
     """A scenario file giving ``path`` the YAML text ``value``; None leaves the key out
     but gives its section (as ``{}`` where nothing else is in it)."""
+    if kind == "event":
+        leaf = path.rsplit(".", 1)[1]
+        entry = dict(EVENT_ENTRIES.get(leaf, EVENT_ENTRY))
+        entry.pop(leaf, None)
+        if value is not None:
+            entry[leaf] = value
+        flow = ", ".join(f"{k}: {v}" for k, v in entry.items())
+        return f"name: x\nevents:\n  - {{{flow}}}\n"
     if kind is not None:
         entry = dict(ENTRY_KINDS[kind][0])
         leaf = path.rsplit(".", 1)[1]
@@ -163,7 +182,7 @@ def test_a_key_marked_required_is_rejected_when_left_out(tmp_path, row):
     path.write_text(_yaml(row.path, None, row.kind))
     with pytest.raises(ScenarioError) as exc_info:
         load_scenario(path)
-    key = row.path.replace(ENTRY, ENTRY_KEY)
+    key = row.path.replace(ENTRY, ENTRY_KEY).replace(f".{INDEX}.", "[0].")
     # A missing discriminator is reported on the entry it would classify.
     where = key.rsplit(".", 1)[0] if key.endswith(".distribution") else key
     assert any(line.startswith(f"{where}:") for line in exc_info.value.problems), \
@@ -252,6 +271,8 @@ def test_step_limit_stated_is_the_schema_bound(doc):
 
 
 def _field(row: Row):
+    if row.kind == "event":
+        return EventEntry.model_fields[row.path.rsplit(".", 1)[1]]
     if row.kind is not None:
         return ENTRY_KINDS[row.kind][1].model_fields[row.path.rsplit(".", 1)[1]]
     model: type[BaseModel] = Scenario
@@ -265,6 +286,8 @@ def _model_of(title: str) -> type[BaseModel] | None:
     kind = re.search(r"`distribution: (\w+)`", title)
     if kind:
         return ENTRY_KINDS[kind.group(1)][1]
+    if title == "`events` entries":
+        return EventEntry
     if title == "Top level":
         return Scenario
     model = Scenario
