@@ -22,13 +22,22 @@ from dynprop.estimator.linear.model import ModelParams
 class Measured(NamedTuple):
     """Telemetry in SI as the filter reads it (``bridge.inputs.telemetry_inputs``):
     Earth-sensor roll, ground yaw (NaN where none), wheel speeds (N, n), the yaw's
-    a-priori 1σ (or None) and the Sun head it came from (NaN where none, or None)."""
+    a-priori 1σ (or None), the Sun head it came from (NaN where none, or None) and the
+    maneuver flag (1 while a thruster fires, 0 otherwise, NaN where a file's flag was
+    screened; None without one: a run without events, a file without the column)."""
 
     roll_rad: np.ndarray
     yaw_rad: np.ndarray
     speeds_radps: np.ndarray
     yaw_sigma_rad: np.ndarray | None
     sun_head: np.ndarray | None
+    maneuver: np.ndarray | None = None
+
+    @property
+    def readings(self) -> tuple:
+        """The five the filters take by position (roll, yaw, speeds, yaw σ, Sun head):
+        the maneuver flag goes by name."""
+        return tuple(self[:5])
 
     def cut(self, rows: slice) -> Measured:
         """The same telemetry on ``rows`` only (None stays None)."""

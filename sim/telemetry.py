@@ -11,6 +11,7 @@ where that angle is undetermined (near noon and midnight at equinox).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +42,9 @@ class Telemetry:
     yaw_head: np.ndarray        # index of the Sun-sensor head used, −1 when none
     wheel_speeds_radps: np.ndarray
     sun: SunReadings
+    # With scheduled events (``sim.events``): 1 inside a thruster firing, else 0, as a
+    # ground system flags a maneuver; None without events.
+    maneuver: np.ndarray | None = None
 
     @property
     def sun_visible(self) -> np.ndarray:
@@ -160,13 +164,36 @@ class TelemetryRows:
         return self.window
 
 
+def with_events(tel: Telemetry, schedule) -> Telemetry:
+    """``tel`` as a run with the ``schedule`` (``sim.events``) receives it: each sensor
+    empty (NaN) inside its outages (earth: roll and pitch; sun: the ground yaw, its σ
+    and head, and every head's angles, while the truth's Sun visibility stays;
+    tachometer: every wheel), and the maneuver flag attached.  The readings are blanked
+    in place (the window's own arrays) after they are drawn, so the noise streams, and
+    the linear twin's draws with them, are those of the run without outages.  Without
+    events, ``tel`` itself."""
+    if not schedule:
+        return tel
+    t = tel.t_s
+    out = schedule.outage("earth", t)
+    tel.roll_rad[out] = np.nan
+    tel.pitch_rad[out] = np.nan
+    out = schedule.outage("sun", t)
+    for a in (tel.yaw_rad, tel.yaw_sigma_rad, tel.sun.alpha_rad, tel.sun.beta_rad):
+        a[out] = np.nan
+    tel.yaw_head[out] = -1
+    tel.wheel_speeds_radps[schedule.outage("tachometer", t)] = np.nan
+    return dataclasses.replace(tel, maneuver=schedule.maneuver(t).astype(float))
+
+
 def sense_window(stream, a: int, b: int, suite: SensorSuite, rngs, pool,
                  min_sun_separation_deg: float = MIN_SUN_SEPARATION_DEG):
     """Samples a … b−1 of a ``sim.truth.TruthStream`` and their telemetry, on both
     cores: the noise drawn in ``pool`` (one thread) while the truth rolls out and is
     sensed a piece at a time behind the rollout (``TruthStream.window(sense=...)``).
-    Returns the truth, the telemetry and the draws (``sensors.draw_ahead``), which a
-    second sensing of the same samples can read again."""
+    Returns the truth, the telemetry (with the stream's events, ``with_events``) and
+    the draws (``sensors.draw_ahead``), which a second sensing of the same samples can
+    read again."""
     n_wheels = stream.spacecraft.n_wheels
     drawn = pool.submit(draw_ahead, suite, rngs, b - a, n_wheels)
     gathered = TelemetryRows(b - a, len(suite.sun_heads), n_wheels)
@@ -175,4 +202,4 @@ def sense_window(stream, a: int, b: int, suite: SensorSuite, rngs, pool,
         make_telemetry(rows, suite, drawn_rows(drawn.result(), lo, hi),
                        min_sun_separation_deg, gathered.rows(lo, hi))
     truth, _ = stream.window(a, b, sense=sense)
-    return truth, gathered.telemetry(), drawn.result()
+    return truth, with_events(gathered.telemetry(), stream.schedule), drawn.result()

@@ -126,7 +126,7 @@ def histories_at(s: Scenario, source, t: np.ndarray, rows: np.ndarray,
         tel = telemetry_inputs(s, cols)
         sl = slice(a - c, b - c)
         own_t = None if regular else np.asarray(cols["t_s"], dtype=float)
-        meas, u, extra = cut_inputs(*filter_inputs(s, params, *tel, t_s=own_t,
+        meas, u, extra = cut_inputs(*filter_inputs(s, params, *tel.readings, t_s=own_t,
                                                    record=record), sl)
         wdisc = disc if regular else StepTable(params, noise, source.steps(a, b))
         result = paper_filter(design, meas, wdisc, *prior, u=u, extra=extra,

@@ -28,7 +28,7 @@ def linear_data(s: Scenario, tel: Measured, t_s=None) -> LinearData:
     """The paper model's data from telemetry (``t_s``: the samples' own times, off the
     grid)."""
     params, noise = build.estimator_model(s)
-    meas, u, _ = filter_inputs(s, params, *tel, t_s=t_s)
+    meas, u, _ = filter_inputs(s, params, *tel.readings, t_s=t_s)
     disc = (discretize(params, noise, s.sample_interval_s) if t_s is None
             else StepTable.from_times(params, noise, t_s))
     return LinearData(meas, u, disc)

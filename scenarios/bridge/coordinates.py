@@ -22,7 +22,7 @@ from dynprop.sim.history import EXTERNAL_TORQUES
 def external_torque(truth) -> np.ndarray:
     """The truth's external torque (N, 3), body axes: every source of
     ``sim.history.EXTERNAL_TORQUES`` the truth holds (gravity gradient excluded; the
-    disturbance only in runs that fly one)."""
+    disturbance and the thrusters only in runs that fly them)."""
     return sum(truth.torques[k] for k in EXTERNAL_TORQUES if k in truth.torques)
 
 

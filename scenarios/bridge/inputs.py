@@ -126,13 +126,15 @@ def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]) -> Measured:
         # which would make the filter badly over-confident on CASS yaw.
         sigma = np.full(len(cols["t_s"]), FALLBACK_YAW_SIGMA_DEG * DEG)
     head = cols.get("sun_head")
-    return Measured(cols["roll_deg"] * DEG, cols["yaw_deg"] * DEG, speeds, sigma, head)
+    return Measured(cols["roll_deg"] * DEG, cols["yaw_deg"] * DEG, speeds, sigma, head,
+                    cols.get("maneuver"))
 
 
 def measured(tel: Telemetry) -> Measured:
     """Simulated telemetry as the filter reads it (the Sun head NaN where none)."""
     head = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
-    return Measured(tel.roll_rad, tel.yaw_rad, tel.wheel_speeds_radps, tel.yaw_sigma_rad, head)
+    return Measured(tel.roll_rad, tel.yaw_rad, tel.wheel_speeds_radps, tel.yaw_sigma_rad, head,
+                    tel.maneuver)
 
 
 def join_padded(prev_tail: tuple | None, cur: tuple, nxt: tuple | None, pad: int
@@ -157,7 +159,8 @@ def padded_filter_inputs(s: Scenario, params, prev_tail: Measured | None, cur: M
     the padded samples' times, off the grid, and ``record`` their file's cadence and
     first time, ``prepared_inputs``')."""
     joined, sl = join_padded(prev_tail, cur, nxt, pad)
-    meas, u, extra = filter_inputs(s, params, *joined, t_s=t_s, record=record)
+    meas, u, extra = filter_inputs(s, params, *Measured(*joined).readings, t_s=t_s,
+                                   record=record)
     meas = type(meas)(*(v[sl] if np.ndim(v) else v for v in
                         (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll, meas.var_yaw,
                          meas.var_h)))

@@ -18,7 +18,7 @@ from dynprop.estimator.linear import model as em
 from dynprop.estimator.linear.propagate import propagate_lti, propagate_lti_final
 from dynprop.estimator.linear.transition import discretize
 from dynprop.sim.frames import rotate_312
-from dynprop.sim.telemetry import Telemetry, make_telemetry
+from dynprop.sim.telemetry import Telemetry, make_telemetry, with_events
 
 from ..config import build
 from ..config.schema import Scenario
@@ -82,7 +82,10 @@ def sense_twin(s: Scenario, truth, twin: np.ndarray, suite, rngs) -> Telemetry:
         wheel_speeds_radps=speeds, shadow=truth.shadow, sun_orbit_frame=truth.sun_orbit_frame,
         sun_body=rotate_312(twin[:, em.Y], twin[:, em.R], truth.pitch_rad,
                             truth.sun_orbit_frame))
-    return make_telemetry(twin_truth, suite, rngs, s.sensors.sun.min_sun_separation_deg)
+    # The twin's sensors are out when the truth's are, and it flies the same flag.
+    return with_events(make_telemetry(twin_truth, suite, rngs,
+                                      s.sensors.sun.min_sun_separation_deg),
+                       build.build_schedule(s))
 
 
 def linear_twin(s: Scenario, truth, run: int, model_torques, tt: TruthTorques):

@@ -331,7 +331,7 @@ class TelemetryColumns(_Section):
     """The file's column for each quantity, by its name in the file's header (CSV) or
     schema (Parquet); a key left out reads the column of dynprop's own telemetry.csv.
     The time is `t_s` or `time_utc`, whichever the file has (`t_s` when it has both);
-    pitch, yaw_sigma and sun_head are optional (docs/telemetry.md)."""
+    pitch, yaw_sigma, sun_head and maneuver are optional (docs/telemetry.md)."""
 
     t_s: str = _column("t_s", "time in seconds from the file's epoch (its `# epoch_utc:` "
                        "line or Parquet metadata, else telemetry.epoch_utc, else the "
@@ -345,6 +345,8 @@ class TelemetryColumns(_Section):
     yaw_sigma: str = _column("yaw_sigma_deg", "each yaw's a-priori 1σ (optional)")
     sun_head: str = _column("sun_head", "the Sun-sensor head of each yaw: 0 (dss), 1 (cass1) "
                             "or 2 (cass2) (optional)")
+    maneuver: str = _column("maneuver", "maneuver flags: 1 while a thruster fires, else 0; "
+                            "another value is screened (optional)")
     wheel1: str = _column("wheel1_rpm", "wheel 1's tachometer speed")
     wheel2: str = _column("wheel2_rpm", "wheel 2's tachometer speed")
 

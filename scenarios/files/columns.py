@@ -118,7 +118,7 @@ def telemetry_lattices(suite, n_wheels: int) -> dict[str, float]:
     place that says which, for the columns themselves (``as_decimal_reading``) and
     for ``csvio``'s faster exact text."""
     earth_q, tach_q = suite.earth.quantum_deg, suite.tachometer.quantum_rpm
-    out = {"roll_deg": earth_q, "pitch_deg": earth_q, "sun_head": 1.0,
+    out = {"roll_deg": earth_q, "pitch_deg": earth_q, "sun_head": 1.0, "maneuver": 1.0,
            **{f"wheel{i + 1}_rpm": tach_q for i in range(n_wheels)}}
     for head in suite.sun_heads:
         out[f"{head.name}_alpha_deg"] = out[f"{head.name}_beta_deg"] = head.quantum_deg
@@ -132,7 +132,8 @@ def telemetry_columns(tel, suite) -> dict[str, np.ndarray]:
     is too near the yaw axis); ``yaw_sigma_deg`` its a-priori 1σ from the sensor and
     the geometry; ``sun_head`` the index of the head it came from (0 = first head);
     ``<head>_{alpha,beta}_deg`` the raw quantised Sun-sensor angles (empty when that
-    head does not see the Sun).  Quantised readings are their decimal values
+    head does not see the Sun); ``maneuver``, only in a run with events, 1 while a
+    thruster fires and 0 otherwise.  Quantised readings are their decimal values
     (``as_decimal_reading``); the run's filter reads these very columns.
     """
     quantum = telemetry_lattices(suite, tel.wheel_speeds_radps.shape[1])
@@ -152,6 +153,8 @@ def telemetry_columns(tel, suite) -> dict[str, np.ndarray]:
         for angle, values in (("alpha", tel.sun.alpha_rad), ("beta", tel.sun.beta_rad)):
             name = f"{head.name}_{angle}_deg"
             cols[name] = as_decimal_reading(values[:, k] * RAD2DEG, quantum[name])
+    if tel.maneuver is not None:
+        cols["maneuver"] = tel.maneuver
     return cols
 
 

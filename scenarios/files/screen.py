@@ -14,6 +14,7 @@ spacecraft can physically produce (limits: ``config.screen.TelemetryScreen``):
   a yaw beyond ±180°;
 - field of view: a head's α or β beyond its half field of view (and that head's yaw in
   the row with it);
+- flag: a maneuver flag (``maneuver``, written by a run with events) neither 0 nor 1;
 - jump: a roll, pitch or wheel reading further from the running median of its two
   neighbours on each side than the fastest motion (the attitude rate, the motor torque)
   over that span, the quantum and 25σ of the noise allow.  The median of five
@@ -41,6 +42,7 @@ REASONS = {
     "range": "outside the sensor's range or the wheel's speed limit",
     "field of view": "outside the Sun-sensor head's field of view (with that head's yaw)",
     "jump": "a jump from the neighbouring readings faster than the attitude or wheel can move",
+    "flag": "a maneuver flag other than 0 or 1",
 }
 FIRST = 5          # rows listed per column in summary.json and the warning
 ANGLE_UNITS = {"deg": 1.0, "rad": RAD2DEG, "urad": 1e-6 * RAD2DEG}   # to degrees
@@ -249,6 +251,8 @@ def screen(cols: dict[str, np.ndarray], written: dict[str, np.ndarray], s,
     wheels = [c for c in out if c.startswith("wheel") and c.endswith("_rpm")]
     for name in wheels:
         drop(name, np.abs(out[name]) > lim.wheel_speed_max_rpm, "range")
+    if "maneuver" in out:
+        drop("maneuver", bad_flags(out["maneuver"]), "flag")
     _screen_heads(out, lim, drop)
     # A yaw without its σ cannot be weighed: it goes with its σ, for the σ's reason.
     for bad in [x for x in found if x.column == "yaw_sigma_deg"]:
@@ -267,6 +271,11 @@ def screen(cols: dict[str, np.ndarray], written: dict[str, np.ndarray], s,
         return cols, ScreenReport(True, lim, (), t, names)
     held = _hold_wheel_ends(out, wheels, found)
     return out, ScreenReport(True, lim, tuple(found), t, names, held)
+
+
+def bad_flags(v: np.ndarray) -> np.ndarray:
+    """Maneuver flags that are neither 0 nor 1 (an empty one is a dropout, not bad)."""
+    return np.isfinite(v) & (v != 0) & (v != 1)
 
 
 def _hold_wheel_ends(out: dict, wheels: list[str], found: list[Screened]) -> tuple:
@@ -380,5 +389,5 @@ def unit_problems(path, cols: dict[str, np.ndarray], s, names: dict[str, str]) -
     return problems
 
 
-__all__ = ["Limits", "ScreenReport", "Screened", "jumps", "limits", "screen",
+__all__ = ["Limits", "ScreenReport", "Screened", "bad_flags", "jumps", "limits", "screen",
            "screen_messages", "screen_warnings", "unit_problems"]

@@ -15,9 +15,10 @@ from dynprop.estimator.kalman.consistency import chi2_bounds
 from dynprop.estimator.linear.model import N_STATES
 
 from .. import __version__
+from ..config import build
 from ..config.schema import Scenario
 from ..units import RAD2DEG
-from .columns import STATE_COLUMNS
+from .columns import STATE_COLUMNS, epoch_ns, utc_text
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,8 @@ def assemble_summary(s: Scenario, params, backend: str, truth: bool, twin: bool,
     eq55 = eq55_sigma_yaw_deg(s, params)
     nees_b = chi2_bounds(N_STATES, 1)
     end_sigma = f.end_sigma
+    # A scenario with events lists them, every occurrence; one without has no key.
+    events = {"events": events_list(s)} if s.events else {}
     return {
         "scenario": s.name, "seed": s.seed, "epoch_utc": s.epoch_utc,
         "duration_s": s.duration_s, "dynprop_version": __version__,
@@ -120,7 +123,31 @@ def assemble_summary(s: Scenario, params, backend: str, truth: bool, twin: bool,
                               {k: v[0] for k, v in f.truth_max.items()}),
         "truth_max_abs_at_h": (None if f.truth_max is None else
                                {k: v[1] / 3600.0 for k, v in f.truth_max.items()}),
+        **events,
     }
+
+
+# Each kind's own fields in summary.json's events, after kind, t_s, end_s, utc, label.
+EVENT_FIELDS = {"thruster": ("duration_s", "torque_Nm"), "sensor_outage": ("duration_s", "sensor"),
+                "trim_tab": ("angle_deg",), "array_offset": ("angle_deg",), "wheel_switch": ()}
+
+
+def events_list(s: Scenario) -> list[dict]:
+    """summary.json's ``events``: every occurrence of the scenario's events, periodic
+    ones repeated, in time order (``sim.events.Schedule``), each with its start and
+    end (s from the epoch), its start in UTC, its label (null without one) and its
+    kind's own fields."""
+    epoch = epoch_ns(s.epoch_utc)
+    out = []
+    for e in build.build_schedule(s).events:
+        utc = utc_text(np.array([epoch + np.timedelta64(int(round(e.t_s * 1e9)), "ns")]))[0]
+        d = {"kind": e.kind, "t_s": e.t_s, "end_s": e.end_s, "utc": str(utc),
+             "label": e.label or None}
+        for name in EVENT_FIELDS[e.kind]:
+            value = getattr(e, name)
+            d[name] = list(value) if isinstance(value, tuple) else value
+        out.append(d)
+    return out
 
 
 def write_summary(path: Path, summary: dict) -> None:

@@ -7,8 +7,8 @@ scenario's ``telemetry`` section (``config.sections.Telemetry``; `dynprop estima
 each is read and converted at the boundary to the canonical columns the rest of
 dynprop reads: ``t_s`` in seconds from the scenario's ``epoch_utc``,
 ``roll_deg``/``pitch_deg``/``yaw_deg``/``yaw_sigma_deg`` in degrees,
-``wheelN_rpm`` in rpm and ``sun_head`` (0, 1, 2).  dynprop's own telemetry.csv is
-read as it is: its t_s and values bit for bit.
+``wheelN_rpm`` in rpm, ``sun_head`` (0, 1, 2) and ``maneuver`` (0, 1).  dynprop's own
+telemetry.csv is read as it is: its t_s and values bit for bit.
 
 The time is either ``t_s`` seconds from an epoch (the file's ``# epoch_utc:`` line
 or Parquet key-value metadata ``epoch_utc``, else ``telemetry.epoch_utc``, else the
@@ -39,6 +39,7 @@ MEASUREMENTS = {
     "yaw": ("yaw_deg", "yaw", True),
     "yaw_sigma": ("yaw_sigma_deg", "yaw_sigma", False),
     "sun_head": ("sun_head", None, False),
+    "maneuver": ("maneuver", None, False),
 }
 # The factor from each unit to the canonical one (None: the values as they are, so
 # that a file in degrees and rpm is read bit for bit).

@@ -34,7 +34,8 @@ class TruthFromFile(Euler312):
     grid) it has a row for: what ``bridge.coordinates.truth_torques`` and
     ``model_truth`` read of a truth, and ``euler_rad`` (yaw, roll, pitch) for the
     figures.  ``torques`` holds the external sources (``sim.history.EXTERNAL_TORQUES``)
-    the file has: the optional ones (the disturbance) only when it has their columns.
+    the file has: the optional ones (the disturbance, the thrusters) only when it has
+    their columns.
     ``file_rows``: the rows the file holds (on the grid or not)."""
 
     t_s: np.ndarray
@@ -112,6 +113,8 @@ def truth_at(path: Path, s: Scenario, cols: dict, t_grid: np.ndarray, on_grid: b
     # The optional sources have columns only in runs that flew them: read when the file
     # has any of their columns, and required when the scenario flies them.
     flown = {"disturbance"} if build.build_disturbance(s).enabled else set()
+    if build.build_schedule(s).of_kind("thruster"):
+        flown.add("thruster")
     sources = [src for src in EXTERNAL_TORQUES if src not in OPTIONAL_TORQUES
                or src in flown or any(f"{src}_{a}_Nm" in cols for a in "xyz")]
     torque_cols = [f"{src}_{a}_Nm" for src in sources for a in "xyz"]

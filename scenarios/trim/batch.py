@@ -306,7 +306,7 @@ def _filter_rows(s: Scenario, source, t_all: np.ndarray, i0: int, i1: int, dt_s:
         pitch = cols["pitch_deg"] * DEG if pitch_name else None
         known = known_torques(s, tw, tel.speeds_radps, tel.roll_rad, pitch)
         sl = slice(a - c, b - c)
-        meas, u, extra = cut_inputs(*filter_inputs(s, params, *tel, known_Nm=known,
+        meas, u, extra = cut_inputs(*filter_inputs(s, params, *tel.readings, known_Nm=known,
                                                    t_s=None if regular else tw,
                                                    record=record), sl)
         wdisc = disc if regular else StepTable.from_times(params, q, tw).cut(sl)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...config.screen import HALF_WINDOW
-from ..screen import HEAD_NAMES, Screened, ScreenReport, _screen_heads, limits
+from ..screen import HEAD_NAMES, Screened, ScreenReport, _screen_heads, bad_flags, limits
 
 WIDTH = 2 * HALF_WINDOW + 1     # the running median's present readings
 CARRY = WIDTH                   # the last window of the file, for its last readings
@@ -90,6 +90,7 @@ def slot_keys(columns) -> list[tuple]:
     keys += [("range", c) for c in ("roll_deg", "pitch_deg", "yaw_deg", "yaw_sigma_deg")
              if c in columns]
     keys += [("range", c) for c in wheels]
+    keys += [("flag", "maneuver")] if "maneuver" in columns else []
     for head in HEAD_NAMES:
         keys += [("field of view", f"{head}_alpha_deg"), ("field of view", f"{head}_beta_deg"),
                  ("field of view", "yaw_deg", head)]
@@ -158,6 +159,8 @@ class BlockScreen:
             drop(("range", "yaw_sigma_deg"), "yaw_sigma_deg", out["yaw_sigma_deg"] <= 0)
         for name in self.wheels:
             drop(("range", name), name, np.abs(out[name]) > lim.wheel_speed_max_rpm)
+        if "maneuver" in out:
+            drop(("flag", "maneuver"), "maneuver", bad_flags(out["maneuver"]))
         head = [None]
 
         def heads_drop(name, mask, reason):
