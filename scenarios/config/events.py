@@ -10,10 +10,8 @@ does not have or one it needs left out.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Literal
 
-from dynprop.sim import environment as sim_env
 from dynprop.sim.ephemeris import parse_epoch
 from dynprop.sim.events import DURATION_KINDS, SENSORS, Event, Schedule, repeated
 from pydantic import Field, field_validator
@@ -116,10 +114,6 @@ def _keys_problems(i: int, e: EventEntry) -> list[str]:
     if e.kind == "wheel_switch":
         out.append(f"{where}.kind: wheel_switch is not flown yet (the truth does not switch "
                    "to the backup yaw wheel mid-run)")
-    if e.kind == "array_offset" and "array_offset_deg" not in {
-            f.name for f in dataclasses.fields(sim_env.SolarTorque)}:
-        out.append(f"{where}.kind: array_offset needs the solar torque's array offset, "
-                   "which this version does not model")
     return out
 
 

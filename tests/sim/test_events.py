@@ -136,10 +136,10 @@ def test_thruster_torque_is_its_own_recorded_source(fired):
 # --------------------------------------------------------------------------- commands
 
 
-def _stream(schedule, duration=900.0):
+def _stream(schedule, duration=900.0, managed=False):
     return TruthStream(goes_next(), GeoOrbit(), Environment(), Control(),
                        InitialState(yaw_rad=1e-3), EQUINOX, duration, DT,
-                       rng=np.random.default_rng(3), schedule=schedule)
+                       rng=np.random.default_rng(3), schedule=schedule, managed=managed)
 
 
 @pytest.mark.parametrize("t_cmd", [400.3, 400.384])    # between samples; on sample 782
@@ -166,6 +166,30 @@ def test_trim_tab_command_changes_the_solar_torque_from_its_sample(t_cmd):
     # It stays commanded: at the run's end, its attitude a little apart, the same ratio.
     np.testing.assert_allclose(np.linalg.norm(cmd.torques["solar"][-1])
                                / np.linalg.norm(plain.torques["solar"][-1]), ratio, rtol=0.01)
+
+
+def test_array_offset_command_adds_its_torque_from_its_sample():
+    """An array offset δ adds κ_o ŝ⊥ (1 AU/r)² shadow with κ_o = untrimmed_offset −
+    effectiveness · δ = 0 − 5e-7 · 4 = −2e-6 N m and ŝ⊥ = ŝ − (d̂·ŝ) d̂ the Sun direction
+    normal to the lever d̂ = y (docs/conventions.md, "The array offset"), from the first
+    sample at or after the command on.  The scale (1 AU/r)² shadow is read off the tab's
+    torque κ d̂ × ŝ of the run without the command, at the same state (the managed step
+    both, so their steps are the same code)."""
+    solar = SolarTorque()
+    assert (solar.offset_effectiveness_Nm_per_deg, solar.untrimmed_offset_torque_Nm,
+            solar.array_offset_deg, solar.lever_axis) == (5e-7, 0.0, 0.0, (0.0, 1.0, 0.0))
+    k = 782                                          # 400.384 s, the first at or after 400.3
+    plain = _stream(None, managed=True).window(0, 1758)
+    cmd = _stream(Schedule((Event("array_offset", 400.3, angle_deg=4.0),))).window(0, 1758)
+    assert np.array_equal(cmd.torques["solar"][:k], plain.torques["solar"][:k])
+    s_hat = plain.sun_body[k] / np.linalg.norm(plain.sun_body[k])
+    d_hat = np.array([0.0, 1.0, 0.0])
+    scale = np.linalg.norm(plain.torques["solar"][k]) / (1e-6 * np.linalg.norm(
+        np.cross(d_hat, s_hat)))
+    s_perp = s_hat - (d_hat @ s_hat) * d_hat
+    expected = plain.torques["solar"][k] + (0.0 - 5e-7 * 4.0) * s_perp * scale
+    np.testing.assert_allclose(cmd.torques["solar"][k], expected, rtol=1e-9, atol=1e-18)
+    assert np.linalg.norm(expected - plain.torques["solar"][k]) > 1e-6
 
 
 def test_windows_and_pieces_with_events_concatenate_to_the_whole_run():
