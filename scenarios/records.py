@@ -22,13 +22,15 @@ from dynprop.estimator.linear.model import ModelParams
 class Measured(NamedTuple):
     """Telemetry in SI as the filter reads it (``bridge.inputs.telemetry_inputs``):
     Earth-sensor roll, ground yaw (NaN where none), wheel speeds (N, n), the yaw's
-    a-priori 1σ (or None) and the Sun head it came from (NaN where none, or None)."""
+    a-priori 1σ (or None), the Sun head it came from (NaN where none, or None) and
+    the thruster-firing flag (1 while firing; None without events)."""
 
     roll_rad: np.ndarray
     yaw_rad: np.ndarray
     speeds_radps: np.ndarray
     yaw_sigma_rad: np.ndarray | None
     sun_head: np.ndarray | None
+    maneuver: np.ndarray | None = None
 
     def cut(self, rows: slice) -> Measured:
         """The same telemetry on ``rows`` only (None stays None)."""

@@ -19,7 +19,14 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 from .. import __version__
 from ..units import DAY_S
 from .batch import Batch
-from .estimation import DEFAULT_OUTPUT_INTERVAL_S, TELEMETRY_AUTO_MAX_S, Estimator, Output, Trim
+from .estimation import (
+    DEFAULT_OUTPUT_INTERVAL_S,
+    TELEMETRY_AUTO_MAX_S,
+    Estimator,
+    ManeuverResponse,
+    Output,
+    Trim,
+)
 from .montecarlo import MonteCarlo, check_dispersion
 from .report import Report
 from .sections import (
@@ -178,16 +185,18 @@ def leaf_paths(model: type[BaseModel], prefix: str = "") -> list[str]:
 _LATER_KEYS = (*((("sensors", *head), key, default) for head in
                  (("earth",), ("tachometer",), ("sun", "dss"), ("sun", "cass1"), ("sun", "cass2"))
                  for key, default in (("outlier_rate", 0.0), ("outlier_size", 20.0))),
-               (("estimator",), "outlier_gate_chi2", None))
+               (("estimator",), "outlier_gate_chi2", None),
+               (("estimator",), "maneuver", ManeuverResponse().model_dump(mode="json")))
 
 
 def resolved_yaml(scenario: Scenario) -> str:
     """Every key with its value, defaults filled, stamped with this version; loads
     back to the same scenario.  The exceptions: ``environment.disturbance``,
-    ``telemetry``, ``batch``, ``report``, ``estimator.bias_states`` and the outlier keys
-    (``_LATER_KEYS``) are written only when they differ from their defaults, so that a
-    scenario without them resolves to the very text it did before they existed (its run
-    directories, and the digest that resumes a Monte Carlo set, unchanged)."""
+    ``telemetry``, ``batch``, ``report``, ``estimator.bias_states``, the outlier keys and
+    ``estimator.maneuver`` (``_LATER_KEYS``) are written only when they differ from
+    their defaults, so that a scenario without them resolves to the very text it did
+    before they existed (its run directories, and the digest that resumes a Monte
+    Carlo set, unchanged)."""
     data = scenario.model_dump(mode="json")
     if scenario.environment.disturbance == Disturbance():
         del data["environment"]["disturbance"]

@@ -115,8 +115,8 @@ def padded_range(source, a: int, b: int, lo: int, hi: int, pad: int, needed: lis
 def used_names(source, s: Scenario, extra: tuple[str, ...] = ()) -> list[str]:
     """The columns ``bridge.inputs.telemetry_inputs`` reads (and ``extra``), those the
     file has."""
-    want = {"t_s", "roll_deg", "yaw_deg", "yaw_sigma_deg", "sun_head", *wheel_names(s),
-            *extra}
+    want = {"t_s", "roll_deg", "yaw_deg", "yaw_sigma_deg", "sun_head", "maneuver",
+            *wheel_names(s), *extra}
     return [c for c in source.names if c in want]
 
 
@@ -126,4 +126,4 @@ def cut_inputs(meas, u: np.ndarray, extra: ExtraNoise | None, sl: slice):
     meas = type(meas)(*(v[sl] if np.ndim(v) else v for v in
                         (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll, meas.var_yaw,
                          meas.var_h)))
-    return meas, u[sl], None if extra is None else ExtraNoise(extra.scale[sl], extra.Qd_unit)
+    return meas, u[sl], None if extra is None else extra.cut(sl)
