@@ -28,7 +28,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kalman.filter import ExtraNoise, Measurements, _extra, _inputs
+from ..kalman.filter import (
+    ExtraNoise,
+    Measurements,
+    _extra,
+    _inputs,
+    cut_measurements,
+    step_matrices,
+)
+from ..kalman.maneuver import filter_segments, smoother_segments
 from ..kalman.steps import pack_params
 from ..linear.model import N_STATES, ModelParams, dynamics_matrix
 from .model import BIAS_NAMES, YAW_HEADS, augmented_dynamics, augmented_rows
@@ -237,7 +245,19 @@ def augmented_filter(meas: Measurements, disc, x0, P0, u=None, *, bias: BiasMode
     names the head of each yaw sample (0 DSS, 1 CASS1, 2 CASS2; NaN where no yaw),
     needed with yaw-bias states.  x0, P0: the paper's nine (biases appended by
     ``augmented_prior``) or the augmented state.  ``rows``, ``covariance_rows``,
-    ``extra`` as in ``kalman_filter``."""
+    ``extra`` as in ``kalman_filter`` (its maneuver response too)."""
+    m = None if extra is None else extra.maneuver
+    if m is not None and m.active:
+        def run(seg, inflated, x, P, seg_rows, seg_cov_rows):
+            return augmented_filter(
+                cut_measurements(meas, seg), m.discretization(disc, inflated), x, P,
+                None if u is None else np.asarray(u)[seg], bias=bias,
+                sun_head=None if sun_head is None else np.asarray(sun_head)[seg],
+                gate_chi2=gate_chi2, extra=ExtraNoise(extra.scale[seg], extra.Qd_unit),
+                rows=seg_rows, covariance_rows=seg_cov_rows, backend=backend, chunk=chunk)
+        return filter_segments(m, run, *_prior(x0, P0, bias), rows, covariance_rows,
+                               ("x", "P_packed", "innovations", "innovation_var",
+                                "rejected"))
     names = _names(bias)
     inputs, present, Qd_unit = _filter_inputs(meas, u, extra, sun_head, bias)
     x0, P0 = _prior(x0, P0, bias)
@@ -268,6 +288,10 @@ def augmented_smoother(result: AugmentedResult, disc, u=None, *, bias: BiasModel
     if tuple(result.names) != names:
         raise ValueError(f"the filter ran with biases {result.names}, not {names}")
     n = len(result.x)
+    m = None if extra is None else extra.maneuver
+    if m is not None and m.active:
+        return _smooth_maneuver(result, disc, _inputs(u, n), bias, extra, covariance,
+                                x_after, P_after, backend, chunk)
     if x_after is not None and covariance and P_after is None:
         raise ValueError("x_after with covariance needs P_after")
     if n < 2 and x_after is None:
@@ -296,6 +320,38 @@ def augmented_smoother(result: AugmentedResult, disc, u=None, *, bias: BiasModel
         return AugmentedSmootherResult(xs, None, names)
     return AugmentedSmootherResult(xs, np.vstack([aux[::-1, k:], result.P_packed[-1:]]),
                                    names)
+
+
+def _smooth_maneuver(result: AugmentedResult, disc, u, bias, extra: ExtraNoise, covariance,
+                     x_after, P_after, backend, chunk) -> AugmentedSmootherResult:
+    """``augmented_smoother`` over the segments of ``extra``'s maneuver response
+    (``kalman.maneuver.smoother_segments``), the reset step on the augmented state
+    (Φ_a = blockdiag(Φ, I), Γ_a = [Γ; 0], Q_d,a = blockdiag(Q_d, diag(q_b Δt)))."""
+    m, names = extra.maneuver, _names(bias)
+    walk = np.asarray(bias.walk_rad2ps if names else (), dtype=float) * disc.dt
+
+    def smooth(seg, inflated, xa, Pa):
+        part = AugmentedResult(result.x[seg], result.P_packed[seg], result.innovations[seg],
+                               result.innovation_var[seg], result.rejected[seg],
+                               result.x_next, result.P_next, result.backend, result.names)
+        return augmented_smoother(part, m.discretization(disc, inflated), u[seg], bias=bias,
+                                  extra=ExtraNoise(extra.scale[seg], extra.Qd_unit),
+                                  covariance=covariance, x_after=xa, backend=backend,
+                                  chunk=chunk, P_after=Pa)
+
+    def reset_step(k, inflated, xa, Pa):
+        Phi, Gam, Q = step_matrices(m.discretization(disc, inflated), k, extra)
+        nb = len(names)
+        Phi_a = np.block([[Phi, np.zeros((N_STATES, nb))], [np.zeros((nb, N_STATES)),
+                                                             np.eye(nb)]])
+        Q_a = np.block([[Q, np.zeros((N_STATES, nb))], [np.zeros((nb, N_STATES)),
+                                                        np.diag(walk)]])
+        return m.smoother_step(Phi_a, np.vstack([Gam, np.zeros((nb, N_STATES))]), Q_a,
+                               result.x[k], unpack(result.P_packed[k]), u[k], xa,
+                               Pa if covariance else None)
+
+    x, P = smoother_segments(m, smooth, reset_step, covariance, x_after, P_after)
+    return AugmentedSmootherResult(x, P, names)
 
 
 def measurement_row(bias: BiasModel | None, kind: str, head: int | None = None

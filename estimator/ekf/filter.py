@@ -23,6 +23,7 @@ import numpy as np
 from dynprop.rollout.chunks import ChunkedRollout
 
 from ..kalman.filter import N_UT, FilterResult
+from ..kalman.maneuver import Maneuver, filter_segments
 from ..linear.steps import per_step, roll_blocks, step_params, substeps
 from . import model as m
 
@@ -131,6 +132,29 @@ class EkfInputs:
     z: np.ndarray
     r: np.ndarray
     u: np.ndarray
+    # The response to a thruster-firing flag (``kalman.maneuver``; its states
+    # ``ROLL_YAW`` of the error state, its prior the EKF's), None without one.
+    maneuver: Maneuver | None = None
+
+    def cut(self, rows) -> EkfInputs:
+        return EkfInputs(self.z[rows], self.r[rows], self.u[rows],
+                         None if self.maneuver is None else self.maneuver.cut(rows))
+
+
+# The error states a maneuver reset returns to the prior: δθ_x, δθ_z, δω_x, δω_z (roll,
+# yaw and their rates, the paper's attitude block); pitch, which the thruster's roll
+# and yaw torques do not move, is left alone, as the wheel momentum and torque states.
+ROLL_YAW = (0, 2, 3, 5)
+
+
+def inflated_params(params: np.ndarray, noise) -> np.ndarray:
+    """The parameter vector with the maneuver's white torque (``Maneuver.noise``)
+    added to q_x and q_z."""
+    p = np.array(params, dtype=float, copy=True)
+    base = m.N_PARAMS - len(m.NOISE_NAMES)
+    p[base + m.NOISE_NAMES.index("q_x")] += noise.q_x
+    p[base + m.NOISE_NAMES.index("q_z")] += noise.q_z
+    return p
 
 
 @dataclass(frozen=True)
@@ -168,7 +192,18 @@ def ekf_filter(inputs: EkfInputs, params: np.ndarray, omega_n_radps: float,
     """Run the EKF over every sample (``rows``: keep only those samples' history).
     ``params`` from ``ekf.model.pack_params``; with ``dt_s`` (the interval after each
     sample, ``steps.step_intervals``) each step propagates over its own Δt instead of
-    the one in ``params`` (``_ekf_per_step``)."""
+    the one in ``params`` (``_ekf_per_step``).  ``inputs.maneuver``: the filter runs
+    segment by segment, each flagged step with the inflated noise, the roll and yaw
+    block of P reset where the response says (``kalman.maneuver``)."""
+    mv = inputs.maneuver
+    if mv is not None and mv.active:
+        def run(seg, inflated, X, P, seg_rows, _):
+            return ekf_filter(EkfInputs(inputs.z[seg], inputs.r[seg], inputs.u[seg]),
+                              inflated_params(params, mv.noise) if inflated else params,
+                              omega_n_radps, X, P, backend, chunk, seg_rows, keep_nominal,
+                              iterations, None if dt_s is None else np.asarray(dt_s)[seg])
+        return filter_segments(mv, run, X0, P0, rows, None,
+                               ("x", "P_packed", "innovations", "innovation_var", "X"))
     z, r, u = (np.asarray(a, dtype=float) for a in (inputs.z, inputs.r, inputs.u))
     n = len(z)
     if z.shape != (n, m.NZ) or r.shape != (n, m.NZ) or u.shape != (n, m.NU):

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..linear.model import N_STATES
 from ..linear.steps import StepTable, roll_blocks
+from .maneuver import Maneuver, filter_segments, smoother_segments
 from .steps import _IU, N_UT, PHI_PATTERN, _engine, pack, pack_params, unpack
 
 
@@ -34,10 +35,20 @@ class ExtraNoise:
     its uncertainty is added as the paper's wheel-torque noise q_w (Eq. 34, which
     drives ẏ and h together) on the bridged steps only: ``Qd_unit`` is Q_d for
     q_w = 1 (N m)² s and ``scale`` the q_w of each step (zero elsewhere, which
-    leaves those steps bit for bit as without it)."""
+    leaves those steps bit for bit as without it).
+
+    ``maneuver`` (``kalman.maneuver``): the response to a thruster-firing flag, which
+    rides along with the dropout noise to every filter and smoother of the run
+    (None: no flag, or one ignored)."""
 
     scale: np.ndarray       # (N,)
     Qd_unit: np.ndarray     # (9, 9)
+    maneuver: Maneuver | None = None
+
+    def cut(self, rows) -> ExtraNoise:
+        """The same noise on samples ``rows`` only."""
+        return ExtraNoise(self.scale[rows], self.Qd_unit,
+                          None if self.maneuver is None else self.maneuver.cut(rows))
 
 
 def _extra(extra: ExtraNoise | None, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -134,7 +145,17 @@ def kalman_filter(meas: Measurements, disc, x0, P0, u=None, backend: str | None 
     instead, only ``P_packed`` is cut to those samples (the estimates, innovations and
     their variances stay at every sample), for a run that needs the covariance only
     where it forms the NEES.  ``extra`` adds process noise on chosen steps
-    (``ExtraNoise``: a telemetry dropout)."""
+    (``ExtraNoise``: a telemetry dropout) and carries the response to a maneuver flag
+    (run segment by segment, ``maneuver.filter_segments``)."""
+    m = None if extra is None else extra.maneuver
+    if m is not None and m.active:
+        def run(seg, inflated, x, P, seg_rows, seg_cov_rows):
+            return kalman_filter(cut_measurements(meas, seg),
+                                 m.discretization(_cut_disc(disc, seg), inflated), x, P,
+                                 u=None if u is None else np.asarray(u)[seg],
+                                 backend=backend, chunk=chunk, rows=seg_rows,
+                                 extra=_plain(extra, seg), covariance_rows=seg_cov_rows)
+        return filter_segments(m, run, x0, P0, rows, covariance_rows, _PER_SAMPLE)
     z, r = meas.z(), meas.r()
     n = len(z)
     x0, P0 = np.asarray(x0, dtype=float), np.asarray(P0, dtype=float)
@@ -181,7 +202,13 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
     stretch, smoothed first, begins), from which the recursion goes back over every
     sample: the smoother of the joined history, without joining it.  Without it the
     last filtered state is its own smoothed value.  With ``covariance``, ``x_after``
-    comes with ``P_after`` (packed), the smoothed covariance there."""
+    comes with ``P_after`` (packed), the smoothed covariance there.  A maneuver
+    response in ``extra`` is the filter's, segment by segment
+    (``maneuver.smoother_segments``)."""
+    m = None if extra is None else extra.maneuver
+    if m is not None and m.active:
+        return _smooth_maneuver(m, result, disc, u, backend, chunk, extra, covariance,
+                                x_after, P_after)
     n = len(result.x)
     if x_after is not None and covariance and P_after is None:
         raise ValueError("x_after with covariance needs P_after")
@@ -217,6 +244,58 @@ def rts_smoother(result: FilterResult, disc, u=None, backend: str | None = None,
         return SmootherResult(xs, None)
     Ps = np.vstack([aux[::-1, N_STATES:], result.P_packed[-1:]])
     return SmootherResult(xs, Ps)
+
+
+_PER_SAMPLE = ("x", "P_packed", "innovations", "innovation_var")
+
+
+def cut_measurements(meas: Measurements, rows) -> Measurements:
+    """The measurements of samples ``rows`` (a scalar variance stays)."""
+    return Measurements(*(v[rows] if np.ndim(v) else v for v in
+                          (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll,
+                           meas.var_yaw, meas.var_h)))
+
+
+def _cut_disc(disc, rows):
+    return disc.cut(rows) if isinstance(disc, StepTable) else disc
+
+
+def _plain(extra: ExtraNoise, rows) -> ExtraNoise:
+    """A segment's dropout noise, without the maneuver the segments already answer."""
+    return ExtraNoise(extra.scale[rows], extra.Qd_unit)
+
+
+def step_matrices(disc, k: int, extra: ExtraNoise | None) -> tuple[np.ndarray, ...]:
+    """Φ, Γ and the total Q_d (with the dropout noise) of step k of ``disc``."""
+    if isinstance(disc, StepTable):
+        d = disc.block_of(disc.index[[k]])
+        Phi, Gam, Qd, unit = d.Phi[0], d.Gamma[0], d.Qd[0], d.Qd_unit[0]
+    else:
+        Phi, Gam, Qd = disc.Phi, disc.Gamma, disc.Qd
+        unit = None if extra is None else extra.Qd_unit
+    e = 0.0 if extra is None else float(extra.scale[k])
+    return Phi, Gam, Qd + e * unit if e else Qd
+
+
+def _smooth_maneuver(m, result, disc, u, backend, chunk, extra, covariance, x_after,
+                     P_after) -> SmootherResult:
+    n = len(result.x)
+    u = _inputs(u, n)
+
+    def smooth(seg, inflated, xa, Pa):
+        part = FilterResult(result.x[seg], result.P_packed[seg], result.innovations[seg],
+                            result.innovation_var[seg], result.x_next, result.P_next,
+                            result.backend)
+        return rts_smoother(part, m.discretization(_cut_disc(disc, seg), inflated), u[seg],
+                            backend, chunk, _plain(extra, seg), covariance, xa, Pa)
+
+    def reset_step(k, inflated, xa, Pa):
+        Phi, Gam, Q = step_matrices(m.discretization(disc, inflated), k, extra)
+        return m.smoother_step(Phi, Gam, Q, result.x[k], unpack(result.P_packed[k]), u[k],
+                               xa, Pa if covariance else None)
+
+    x, P = smoother_segments(m, smooth, reset_step, covariance, x_after, P_after)
+    return SmootherResult(x, P)
 
 
 def _smoother_start(result, covariance: bool, x_after, P_after) -> np.ndarray:

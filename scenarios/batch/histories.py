@@ -92,7 +92,7 @@ def _smooth(design, pieces: list[_Piece], stop: int, disc, source, params, noise
     for p in reversed([p for p in pieces if p.a < stop]):
         m = min(p.b, stop) - p.a
         result = head(p.result, m) if m < p.b - p.a else p.result
-        extra = None if p.extra is None else ExtraNoise(p.extra.scale[:m], p.extra.Qd_unit)
+        extra = None if p.extra is None else p.extra.cut(slice(0, m))
         d = disc if disc is not None else StepTable(params, noise, source.steps(p.a, p.a + m))
         sm = paper_smoother(design, result, d, u=p.u[:m], extra=extra,
                             x_after=None if after is None else after[0],

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 from dynprop.estimator.kalman.filter import ExtraNoise
+from dynprop.estimator.kalman.maneuver import ATTITUDE, Maneuver, maneuver_intensity
 from dynprop.estimator.kalman.preprocess import (
     cadence,
     prepare,
@@ -69,9 +70,12 @@ def yaw_correlation_inflation(s: Scenario, sun_head, dt_s: float | None = None) 
 
 
 def prepared_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
-                    known_Nm=None, t_s=None, record: tuple[float, float] | None = None):
+                    maneuver=None, known_Nm=None, t_s=None,
+                    record: tuple[float, float] | None = None):
     """Telemetry arrays to the filter's measurements and inputs
     (``estimator.preprocess.FilterInputs``, with a dropout's measured wheel noise).
+    ``maneuver`` (the thruster-firing flag) changes none of them: ``filter_inputs``
+    answers it.
     ``known_Nm`` (N, 2), roll and yaw torques known per sample, joins the modelled
     N_x*, N_z* (Eq. 9).  ``t_s``: the samples' own times, for telemetry off the
     scenario's grid (``estimator.linear.steps``); None on the grid.  ``record``: the
@@ -94,14 +98,15 @@ def prepared_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_
 
 
 def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_head=None,
-                  known_Nm=None, t_s=None, record=None):
+                  maneuver=None, known_Nm=None, t_s=None, record=None):
     """Telemetry arrays to the filter's measurements, inputs u and any dropout noise
     (``ExtraNoise`` or None); ``prepared_inputs`` says what each is.  With ``t_s`` the
     dropout noise's unit matrix is each step's own (``estimator.steps.StepTable``), and
-    ``ExtraNoise.Qd_unit`` is not used."""
+    ``ExtraNoise.Qd_unit`` is not used.  A ``maneuver`` flag (N,) rides in the
+    ``ExtraNoise`` as the scenario's response to it (``maneuver_response``)."""
     e = s.estimator
-    inputs = prepared_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, known_Nm,
-                             t_s, record)
+    inputs = prepared_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head, None,
+                             known_Nm, t_s, record)
     extra = None
     if inputs.wheel_noise is not None:
         unit = np.zeros((em.N_STATES, em.N_STATES)) if t_s is not None else discretize(
@@ -109,7 +114,27 @@ def filter_inputs(s: Scenario, params, roll, yaw, speeds, yaw_sigma=None, sun_he
         # The bridge's measured q_w is the whole wheel-torque uncertainty there; the
         # filter's own q_w already carries part of it.
         extra = ExtraNoise(np.maximum(inputs.wheel_noise - e.process_noise.q_w, 0.0), unit)
+    response = maneuver_response(s, params, maneuver)
+    if response is not None:
+        extra = ExtraNoise(np.zeros(len(response)), np.zeros((em.N_STATES, em.N_STATES)),
+                           response) if extra is None else \
+            ExtraNoise(extra.scale, extra.Qd_unit, response)
     return inputs.measurements, inputs.u, extra
+
+
+def maneuver_response(s: Scenario, params, flag, prior=None,
+                      states: tuple[int, ...] = ATTITUDE) -> Maneuver | None:
+    """The scenario's response (``estimator.maneuver``) to a telemetry's thruster-firing
+    ``flag`` (``estimator.kalman.maneuver``): None without a flag or with ``ignore``.
+    ``prior``, ``states``: the reset's block and the states it covers (the paper
+    filter's attitude and ``estimator.initial_sigma`` unless given)."""
+    if flag is None:
+        return None
+    if prior is None:
+        prior = initial_prior(s, params)[1][np.ix_(states, states)]
+    r = s.estimator.maneuver
+    return Maneuver.of(flag, r.response, maneuver_intensity(r.torque_Nm, r.max_duration_s),
+                       params, prior, states)
 
 
 def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]) -> Measured:
@@ -165,5 +190,5 @@ def padded_filter_inputs(s: Scenario, params, prev_tail: Measured | None, cur: M
                         (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll, meas.var_yaw,
                          meas.var_h)))
     if extra is not None:
-        extra = ExtraNoise(extra.scale[sl], extra.Qd_unit)
+        extra = extra.cut(sl)
     return meas, u[sl], extra

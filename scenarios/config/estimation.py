@@ -118,6 +118,28 @@ class BiasStates(_Section):
                      if getattr(self, name).model != "off")
 
 
+class ManeuverResponse(_Section):
+    """What the filters do while the telemetry's ``maneuver`` flag is set (a thruster
+    firing, which the filter's model does not know), used only when the telemetry
+    has that column: ``inflate`` adds a white roll and yaw torque of intensity
+    torque_Nm² · max_duration_s on every flagged step, so that the rate variance it
+    adds over a flagged stretch no longer than max_duration_s covers the impulse
+    (torque_Nm · duration)²; ``reset`` returns the attitude and rate states'
+    covariance to the initial prior (``initial_sigma``) at the first sample after a
+    flagged stretch, the estimate kept; ``ignore`` does nothing (docs/validation.md
+    shows what follows).  The pitch filter does not respond (the Earth sensor
+    measures pitch at every sample)."""
+
+    response: Literal["inflate", "reset", "ignore"] = Field(
+        "inflate", description="'inflate': more process noise while the flag is set; "
+        "'reset': the attitude and rate covariance back to the prior after it; 'ignore': "
+        "the flag is read and not used")
+    torque_Nm: float = Field(0.01, gt=0, description="the largest roll or yaw thruster "
+                             "torque expected (N m)")
+    max_duration_s: float = Field(600.0, gt=0, description="the longest flagged stretch "
+                                  "the inflated noise covers (s)")
+
+
 class Estimator(_Section):
     filters: list[Literal["paper", "ekf"]] = Field(
         ["paper"], min_length=1, description="which filters `dynprop run` runs on the same "
@@ -141,6 +163,7 @@ class Estimator(_Section):
         "the process noise); one longer than this is listed in summary.json's telemetry "
         "and warnings.")
     bias_states: BiasStates = Field(default_factory=BiasStates)
+    maneuver: ManeuverResponse = Field(default_factory=ManeuverResponse)
     outlier_gate_chi2: float | None = Field(
         None, gt=0, description="per-measurement innovation gate: a roll, yaw or h whose "
         "ν²/S exceeds it (χ² with 1 degree of freedom) is rejected, so that one outlier "

@@ -20,7 +20,14 @@ from pydantic import BaseModel, Field, Strict, field_validator, model_validator
 from .. import __version__
 from ..units import DAY_S
 from .batch import Batch
-from .estimation import DEFAULT_OUTPUT_INTERVAL_S, TELEMETRY_AUTO_MAX_S, Estimator, Output, Trim
+from .estimation import (
+    DEFAULT_OUTPUT_INTERVAL_S,
+    TELEMETRY_AUTO_MAX_S,
+    Estimator,
+    ManeuverResponse,
+    Output,
+    Trim,
+)
 from .events import EventEntry, event_problems
 from .management import MomentumManagement
 from .montecarlo import MonteCarlo, check_dispersion
@@ -202,17 +209,23 @@ def leaf_paths(model: type[BaseModel], prefix: str = "") -> list[str]:
 _LATER_KEYS = (*((("sensors", *head), key, default) for head in
                  (("earth",), ("tachometer",), ("sun", "dss"), ("sun", "cass1"), ("sun", "cass2"))
                  for key, default in (("outlier_rate", 0.0), ("outlier_size", 20.0))),
-               (("estimator",), "outlier_gate_chi2", None))
+               (("estimator",), "outlier_gate_chi2", None),
+               (("estimator",), "maneuver", ManeuverResponse().model_dump(mode="json")),
+               # The array offset (issue 45): absent means the paper's array, Sun-normal.
+               (("environment", "solar"), "array_offset_deg", 0.0),
+               (("environment", "solar"), "offset_effectiveness_Nm_per_deg", 5e-7),
+               (("environment", "solar"), "untrimmed_offset_torque_Nm", 0.0))
 
 
 def resolved_yaml(scenario: Scenario) -> str:
     """Every key with its value, defaults filled, stamped with this version; loads
     back to the same scenario.  The exceptions: ``environment.disturbance``,
     ``telemetry``, ``batch``, ``report``, ``events`` (each entry with its own keys
-    only), ``estimator.bias_states`` and the outlier keys (``_LATER_KEYS``) are written
-    only when they differ from their defaults, so that a scenario without them
-    resolves to the very text it did before they existed (its run directories, and
-    the digest that resumes a Monte Carlo set, unchanged)."""
+    only), ``momentum_management``, ``estimator.bias_states``, the outlier keys,
+    ``estimator.maneuver`` and the array offset's (``_LATER_KEYS``) are written only
+    when they differ from their defaults, so that a scenario without them resolves to
+    the very text it did before they existed (its run directories, and the digest that
+    resumes a Monte Carlo set, unchanged)."""
     data = scenario.model_dump(mode="json")
     if scenario.environment.disturbance == Disturbance():
         del data["environment"]["disturbance"]
@@ -228,6 +241,8 @@ def resolved_yaml(scenario: Scenario) -> str:
                           for e in data["events"]]
     else:
         del data["events"]
+    if scenario.momentum_management == MomentumManagement():
+        del data["momentum_management"]
     if scenario.estimator.bias_states == type(scenario.estimator.bias_states)():
         del data["estimator"]["bias_states"]
     for where, key, default in _LATER_KEYS:

@@ -19,12 +19,14 @@ from ..units import DEG
 
 
 def run_ekf(s: Scenario, roll, pitch, yaw, speeds, yaw_sigma=None, sun_head=None,
-            rows=None, keep_nominal: bool = False, t_s=None) -> EkfResult:
+            rows=None, keep_nominal: bool = False, t_s=None, maneuver=None) -> EkfResult:
     """The EKF on telemetry arrays; ``t_s``: the samples' own times, for telemetry off
-    the grid (each step its own Δt, ``estimator.ekf``)."""
+    the grid (each step its own Δt, ``estimator.ekf``); ``maneuver``: the
+    thruster-firing flag (``bridge.ekf.ekf_maneuver``)."""
     params, _ = build.estimator_model(s)
     pm, wn, X0, P0 = ekf_design(s)
-    inputs = ekf_inputs(s, params, roll, pitch, yaw, speeds, yaw_sigma, sun_head, t_s=t_s)
+    inputs = ekf_inputs(s, params, roll, pitch, yaw, speeds, yaw_sigma, sun_head, t_s=t_s,
+                        maneuver=maneuver)
     return ekf_filter(inputs, pm, wn, X0, P0, rows=rows, keep_nominal=keep_nominal,
                       dt_s=None if t_s is None else step_intervals(t_s))
 
@@ -44,9 +46,11 @@ def other_filters(s: Scenario, columns: dict, rows=None, on_grid: bool = True
     if "ekf" not in s.estimator.filters:
         return {}
     check_ekf_columns(s, columns)
-    roll, yaw, speeds, sigma, head = telemetry_inputs(s, columns)
-    return {"ekf": run_ekf(s, roll, columns["pitch_deg"] * DEG, yaw, speeds, sigma, head,
-                           rows=rows, t_s=None if on_grid else columns["t_s"])}
+    tel = telemetry_inputs(s, columns)
+    return {"ekf": run_ekf(s, tel.roll_rad, columns["pitch_deg"] * DEG, tel.yaw_rad,
+                           tel.speeds_radps, tel.yaw_sigma_rad, tel.sun_head, rows=rows,
+                           t_s=None if on_grid else columns["t_s"],
+                           maneuver=tel.maneuver)}
 
 
 class EkfStream:

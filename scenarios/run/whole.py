@@ -80,15 +80,16 @@ def pitch_history(s: Scenario, pitch_rad, speeds, truth: np.ndarray | None, t_s=
 
 
 def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
-                     sun_head=None, rows=None, t_s=None) -> tuple[FilterResult, dict]:
+                     sun_head=None, maneuver=None, rows=None, t_s=None
+                     ) -> tuple[FilterResult, dict]:
     """Preprocess telemetry arrays and run the filter; returns the result (the
     history only at ``rows`` if given) and what the smoother needs besides it
     (``filtering.paper_smoother(design, result, disc, **that)``: the inputs u and any
-    dropout noise).
+    dropout noise, with the response to a ``maneuver`` flag).
     ``t_s``: the samples' own times when they are off the scenario's grid (``disc``
     then a ``StepTable``)."""
     meas, u, extra = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head,
-                                   t_s=t_s)
+                                   maneuver, t_s=t_s)
     x0, P0 = initial_prior(s, params)
     design = design_of(s)
     result = paper_filter(design, meas, disc, x0, P0, u, extra, sun_head, rows=rows)

@@ -126,4 +126,4 @@ def cut_inputs(meas, u: np.ndarray, extra: ExtraNoise | None, sl: slice):
     meas = type(meas)(*(v[sl] if np.ndim(v) else v for v in
                         (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll, meas.var_yaw,
                          meas.var_h)))
-    return meas, u[sl], None if extra is None else ExtraNoise(extra.scale[sl], extra.Qd_unit)
+    return meas, u[sl], None if extra is None else extra.cut(sl)

@@ -176,8 +176,7 @@ def smooth_pieces(design, result, disc, u, extra, covariance: bool, after: dict,
         rows = slice(a, b)
         d = disc.cut(rows) if isinstance(disc, StepTable) else disc
         r = paper_smoother(design, stretch(result, rows), d, u=u[rows], covariance=True,
-                           extra=None if extra is None else ExtraNoise(extra.scale[rows],
-                                                                       extra.Qd_unit),
+                           extra=None if extra is None else extra.cut(rows),
                            **after)
         x[rows], sigma[rows] = r.x, r.sigma
         after = {"x_after": smoothed_full_x(r)[0], "P_after": smoothed_full_P(r)[0]}
@@ -204,8 +203,7 @@ def smoothed(s: Scenario, records, smooth: bool = True, covariance: bool = False
                 m = min(plan.overlap, len(nxt.window.t_s))
                 d = nxt.disc if not isinstance(nxt.disc, StepTable) else \
                     nxt.disc.cut(slice(0, m))
-                extra = None if nxt.extra is None else ExtraNoise(nxt.extra.scale[:m],
-                                                                  nxt.extra.Qd_unit)
+                extra = None if nxt.extra is None else nxt.extra.cut(slice(0, m))
                 _, _, after = smooth_pieces(design, head(nxt.real, m), d, nxt.u[:m], extra,
                                             covariance, {})
             x, sigma, _ = smooth_pieces(design, cur.real, cur.disc, cur.u, cur.extra,
