@@ -54,8 +54,11 @@ def legend(events) -> list[dict]:
             entry |= {"mode": "markers",
                       "marker": {"symbol": "square", "size": 12, "color": _color(kind)}}
         else:
-            entry |= {"mode": "lines",
-                      "line": {"color": _color(kind, True), "width": 1.5, "dash": "dash"}}
+            # A vertical tick for a vertical line (a "lines" trace of no point would
+            # be an empty path).
+            entry |= {"mode": "markers", "marker": {
+                "symbol": "line-ns-open", "size": 14, "color": _color(kind, True),
+                "line": {"width": 2, "color": _color(kind, True)}}}
         out.append(entry)
     return out
 

@@ -257,10 +257,10 @@ def test_page_marks_and_lists_each_event(runs, tmp_path):
                    for f in plain_figures.values() for s in f["layout"].get("shapes", []))
 
 
-def test_a_summary_without_events_draws_as_before(runs, tmp_path):
-    """The events run with summary.json's ``events`` taken out (a run before issue 45):
-    errors.png and season.png are the plain run's files, byte for byte, though its
-    daily.csv holds the event columns."""
+def test_the_figures_follow_summary_events_alone(runs, tmp_path):
+    """The events run with summary.json's ``events`` taken out: errors.png and
+    season.png are the plain run's files, byte for byte, though its daily.csv holds
+    the event columns (what marks an event is summary.json's list, nothing else)."""
     from scenarios.figures import save_figure
     from scenarios.figures.run import run_figure
     copy = Path(shutil.copytree(runs["events"], tmp_path / "copy"))
