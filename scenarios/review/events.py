@@ -71,7 +71,7 @@ def _details(e: dict) -> str:
         return f"{e['sensor']} sensor out"
     if e.get("angle_deg") is not None:
         return f"to {e['angle_deg']:g}°"
-    return ""
+    return "to the backup yaw wheel" if e["kind"] == "wheel_switch" else ""
 
 
 def table(events) -> Table | None:
