@@ -118,9 +118,11 @@ def summary_events(summary: Mapping | None) -> list[dict]:
     which errors.png, season.png and the page mark; none without the key (a run
     without events: nothing is drawn, nothing changes)."""
     items = (summary or {}).get("events") or []
-    return [e for e in items if isinstance(e, dict) and {"kind", "t_s", "end_s"} <= set(e)]
+    return [e for e in items if isinstance(e, dict) and {"kind", "t_s"} <= set(e)]
 
 
 def shifted(events: list[dict], t0_s: float) -> list[dict]:
     """``events`` with their times counted from ``t0_s`` (a day axis's first day)."""
-    return [e | {"t_s": e["t_s"] - t0_s, "end_s": e["end_s"] - t0_s} for e in events]
+    return [e | {"t_s": e["t_s"] - t0_s}
+            | ({"end_s": e["end_s"] - t0_s} if e.get("end_s") is not None else {})
+            for e in events]

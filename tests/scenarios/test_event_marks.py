@@ -8,7 +8,9 @@ replaced by a list written by hand, so the outputs are checked against seconds
 counted by hand (an event across midnight, one past the run's end, two sensors out
 at once) and, for random events, against an independent count on a 1 s grid.  The
 run without events is the same scenario, seed and samples: its daily.csv must hold
-the old columns alone, with the same values.
+the old columns alone, with the same values.  The tests on those two runs check
+wiring against hand counts, no reference number: ``surface`` (the compiled pass
+runs them).
 """
 
 from __future__ import annotations
@@ -126,6 +128,7 @@ def test_event_dicts_is_empty_without_events():
     assert event_days.event_dicts(object()) == []
 
 
+@pytest.mark.surface
 def test_daily_csv_gains_the_event_columns_only_with_events(runs):
     plain = pd.read_csv(runs["plain"] / "daily.csv")
     marked = pd.read_csv(runs["events"] / "daily.csv")
@@ -137,6 +140,7 @@ def test_daily_csv_gains_the_event_columns_only_with_events(runs):
         np.testing.assert_array_equal(marked[column].to_numpy(), want, err_msg=column)
 
 
+@pytest.mark.surface
 def test_the_event_columns_and_keys_are_documented(runs):
     from .test_outputs_doc import _spans, csv_columns, json_keys, undocumented
     spans = _spans()
@@ -195,12 +199,14 @@ def _no_marks(fig) -> None:
             assert _event_artists(ax, kind) == ([], []), kind
 
 
+@pytest.mark.surface
 def test_errors_png_marks_each_event(runs):
     from scenarios.figures.run import run_figure
     _check_marks(run_figure(runs["events"], "errors"), lambda t: t / 3600.0)
     _no_marks(run_figure(runs["plain"], "errors"))
 
 
+@pytest.mark.surface
 def test_season_png_marks_each_event(runs):
     from scenarios.figures.run import run_figure
     fig = run_figure(runs["events"], "season")
@@ -225,6 +231,7 @@ def _shapes(figure: dict, kind: str) -> list[dict]:
     return [s for s in figure["layout"].get("shapes", []) if s.get("name") == f"event: {kind}"]
 
 
+@pytest.mark.surface
 def test_page_marks_and_lists_each_event(runs, tmp_path):
     from .test_report import check_numbers
     html, figures = _page(runs["events"])
@@ -257,6 +264,7 @@ def test_page_marks_and_lists_each_event(runs, tmp_path):
                    for f in plain_figures.values() for s in f["layout"].get("shapes", []))
 
 
+@pytest.mark.surface
 def test_the_figures_follow_summary_events_alone(runs, tmp_path):
     """The events run with summary.json's ``events`` taken out: errors.png and
     season.png are the plain run's files, byte for byte, though its daily.csv holds
