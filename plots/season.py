@@ -160,8 +160,9 @@ def plot_season(daily: dict[str, np.ndarray], title: str, warnings=(), events=No
     _month_ticks(ax, x)
     for a in axes:
         a.grid(alpha=0.3)
-        # A row's point sits at its day's start (x[0]: the first day's).
-        mark_events(a, events, lambda t: x[0] + t / 86400.0)
+        # A row's point and eclipse bar are centred on its day: the first day spans
+        # x[0] ± 0.5, and an event falls inside its own day's bar.
+        mark_events(a, events, lambda t: x[0] - 0.5 + t / 86400.0)
     fig.suptitle(f"{headline(daily)}\n{title}", fontsize=9.5)
     figure_legend(fig, axes, ncol=3)
     return fig

@@ -317,7 +317,8 @@ def telemetry(c: dict, ax: Axis) -> Plot | None:
 def season(daily: dict, events=(), t0_s: float = 0.0) -> Plot | None:
     """A long run's days (daily.csv): the gap-end yaw error with the filter's ±3σ and
     Eq. 55's, the daily yaw RMS real and linearized, and the eclipse minutes; the
-    scheduled ``events`` marked (day k holds t in [t0_s + k, t0_s + k + 1) days)."""
+    scheduled ``events`` marked (day k holds t in [t0_s + k, t0_s + k + 1) days, drawn
+    over k ± 0.5: an event falls inside its own day's width)."""
     day = np.asarray(daily.get("day", []), dtype=float)
     if len(day) < 3:
         return None
@@ -340,6 +341,6 @@ def season(daily: dict, events=(), t0_s: float = 0.0) -> Plot | None:
     caption = "One point per day of the run (daily.csv, every figure at the full sample rate)."
     return Plot("season", "The run's days", caption,
                 {"data": data, "layout": tr.stacked_layout(
-                    panels, "day of the run", 200, ev.shapes(events, 86400.0, t0_s),
+                    panels, "day of the run", 200, ev.shapes(events, 86400.0, t0_s + 43200.0),
                     x_range=(day[0] - 0.5, day[-1] + 0.5))},
                 time_axis=False)

@@ -211,7 +211,8 @@ def test_season_png_marks_each_event(runs):
     from scenarios.figures.run import run_figure
     fig = run_figure(runs["events"], "season")
     doy = pd.read_csv(runs["events"] / "daily.csv")["day_of_year"].iloc[0]
-    _check_marks(fig, lambda t: doy + t / DAY)
+    # Day k's point at its day of year, the day spanning ± half a day about it.
+    _check_marks(fig, lambda t: doy - 0.5 + t / DAY)
     _no_marks(run_figure(runs["plain"], "season"))
 
 
@@ -238,13 +239,13 @@ def test_page_marks_and_lists_each_event(runs, tmp_path):
     time_figures = {k: f for k, f in figures.items() if k != "season"}
     assert {"errors", "consistency", "torques", "telemetry"} <= set(time_figures)
     for name, f in figures.items():
-        # Hours on a 2-day page; days from the first row on the season's.
-        scale = DAY if name == "season" else 3600.0
+        # Hours on a 2-day page; on the season's, days of the run, day k over k ± 0.5.
+        scale, at = (DAY, 0.5) if name == "season" else (3600.0, 0.0)
         for kind in {e["kind"] for e in EVENTS}:
             ours = [e for e in EVENTS if e["kind"] == kind]
             got = sorted((s["x0"], s["x1"]) for s in _shapes(f, kind))
             ends = "end_s" if kind in ("thruster", "sensor_outage") else "t_s"
-            _same(got, sorted((e["t_s"] / scale, e[ends] / scale) for e in ours),
+            _same(got, sorted((e["t_s"] / scale - at, e[ends] / scale - at) for e in ours),
                   (name, kind))
         legend = [t["name"] for t in f["data"] if t.get("showlegend", True) and
                   t.get("legendgroup", "").startswith("event: ")]
