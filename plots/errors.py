@@ -33,6 +33,7 @@ from .decor import (  # noqa: E402
     symlog_axis,
     time_axis,
 )
+from .events import mark_events  # noqa: E402
 from .reduce import (  # noqa: E402
     band,
     f64,
@@ -288,6 +289,10 @@ def row_label(t_s, series: dict) -> str:
     return f"{median_step(t_s):.3g} s"
 
 
+def _to_hours(t: float) -> float:
+    return t / 3600.0
+
+
 def _hours(t_s):
     return None if t_s is None else f64(t_s) / 3600.0
 
@@ -301,7 +306,7 @@ def _shader(t_s, t_h, gap, min_gap_s: float, labels):
 def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
                 paper_sigma_deg: float, paper_sigma_label: str | None = None,
                 gap_labels: tuple[str, str] | None = None, warnings=None,
-                screened_t_s=None):
+                screened_t_s=None, events=None):
     """Estimation error vs time for roll, yaw and h, and beneath each real −
     linearized (with the twin) and EKF − paper filter (with the EKF); and pitch (the
     Eq. 3b filter's, a series of its own) when given.
@@ -321,7 +326,9 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
     run's warning messages, written under the figure in red.  ``t_s`` may hold
     breaks (NaN rows, ``reduce``): telemetry gaps, shaded and never drawn across.
     ``screened_t_s``: the times (s) of samples with a screened value, ticked at the
-    top of each error panel.
+    top of each error panel.  ``events``: the run's scheduled events (summary.json's
+    dicts, ``t_s`` and ``end_s`` in the rows' seconds), marked on every panel
+    (``events.mark_events``).
     """
     t_s = f64(t_s)
     t_h = t_s / 3600.0
@@ -351,6 +358,7 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
         else:
             _difference_panel(ax, t_s, t_h, shade, name, series[name], interval_s, step,
                               "ekf" if kind == "ekf" else "linear")
+        mark_events(ax, events, _to_hours)
     time_axis(axes[-1], t_h)
     figure_legend(fig, axes, ncol=3)
     fig.suptitle(f"Estimation error vs time — {title}")
@@ -360,7 +368,7 @@ def plot_errors(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
 def plot_estimates(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0, *,
                    paper_sigma_deg: float, paper_sigma_label: str | None = None,
                    gap_labels: tuple[str, str] | None = None, warnings=None,
-                   screened_t_s=None):
+                   screened_t_s=None, events=None):
     """Without a truth: the estimates of roll, yaw, h (and pitch when given) with the
     filter's ±3σ about them.  ``series[name]`` = {"unit", "estimate", "sigma"}; the
     other arguments as ``plot_errors``."""
@@ -378,6 +386,7 @@ def plot_estimates(t_s, gap, series: dict, title: str, min_gap_s: float = 600.0,
         est, sig, unit = f64(s["estimate"]), np.abs(f64(s["sigma"])), s["unit"]
         shade(ax, True)
         mark_screened(ax, _hours(screened_t_s), label=True)
+        mark_events(ax, events, _to_hours)
         x, lo, hi = band(t_h, est - 3 * sig, est + 3 * sig)
         ax.fill_between(x, lo, hi, color="C0", alpha=0.22, lw=0, zorder=1,
                         label="estimate ± filter 3σ")

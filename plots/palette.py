@@ -39,3 +39,22 @@ PALETTE = {
     "screened": Shade("#e7298a", 1.0),
     "eclipse": Shade("#3c3c8c", 0.20),
 }
+
+# The scheduled events (issue 45), each kind its own colour and name, the same in the
+# PNG figures and on the page: a duration is a thin band (its edges drawn, so a
+# 20-minute outage still shows on a year's axis), a command a vertical line.
+EVENT_SHADES = {
+    "thruster": Shade("#b8860b", 0.45),         # dark gold
+    "sensor_outage": Shade("#17becf", 0.40),    # cyan
+    "trim_tab": Shade("#8c564b", 0.95),         # brown
+    "array_offset": Shade("#6a3d9a", 0.95),     # violet
+    "wheel_switch": Shade("#1b9e77", 0.95),     # teal green
+}
+EVENT_LABELS = {
+    "thruster": "thruster firing (scheduled event)",
+    "sensor_outage": "sensor outage (scheduled event)",
+    "trim_tab": "trim-tab command",
+    "array_offset": "solar-array offset command",
+    "wheel_switch": "switch to the backup yaw wheel",
+}
+DURATION_EVENTS = ("thruster", "sensor_outage")

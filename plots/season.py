@@ -17,6 +17,7 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 
 from .decor import figure_legend, panel_figure  # noqa: E402
+from .events import mark_events  # noqa: E402
 
 MONTH_STARTS = (1, 32, 60, 91, 121, 152, 182, 213, 244, 274, 305, 335)
 MONTHS = ("Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec")
@@ -94,11 +95,13 @@ def _error_half_range(err, band, eq55_3s: float) -> tuple[float, list[str]]:
     return half, notes
 
 
-def plot_season(daily: dict[str, np.ndarray], title: str, warnings=()):
+def plot_season(daily: dict[str, np.ndarray], title: str, warnings=(), events=None):
     """season.png; ``title`` (scenario, seed, epoch) goes under a headline computed from
     the rows (``headline``).  One legend for the figure, below the axes, off the data;
     the run's ``warnings`` (messages), when any, above the panels: a long run's truth
-    drifting out of the linear range is said where the season is drawn."""
+    drifting out of the linear range is said where the season is drawn.  ``events``:
+    the run's scheduled events (summary.json's dicts, ``t_s`` and ``end_s`` in seconds
+    from the start of the first row's day), marked on every panel."""
     x = continuous_day(daily["day_of_year"])
     fig, axes = panel_figure([3, 1.3, 2], warnings, inch=1.3, width_in=11.0)
     ax = axes[0]
@@ -157,6 +160,9 @@ def plot_season(daily: dict[str, np.ndarray], title: str, warnings=()):
     _month_ticks(ax, x)
     for a in axes:
         a.grid(alpha=0.3)
+        # A row's point and eclipse bar are centred on its day: the first day spans
+        # x[0] ± 0.5, and an event falls inside its own day's bar.
+        mark_events(a, events, lambda t: x[0] - 0.5 + t / 86400.0)
     fig.suptitle(f"{headline(daily)}\n{title}", fontsize=9.5)
     figure_legend(fig, axes, ncol=3)
     return fig

@@ -18,9 +18,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from dynprop.plots.palette import PALETTE, Shade
+from dynprop.plots.events import event_label
+from dynprop.plots.palette import DURATION_EVENTS, EVENT_SHADES, PALETTE, Shade
 
-__all__ = ["PALETTE", "Shade", "Cut", "cut_at_gaps", "telemetry_gaps", "telemetry_present"]
+__all__ = ["PALETTE", "Shade", "Cut", "cut_at_gaps", "telemetry_gaps", "telemetry_present",
+           "DURATION_EVENTS", "EVENT_SHADES", "event_label", "summary_events", "shifted"]
 
 # A stretch without a telemetry row longer than this many of the file's usual steps
 # is a gap: well above a jittered or thinned cadence (a lost row doubles a step),
@@ -109,3 +111,18 @@ def cut_at_gaps(c: Mapping) -> Cut:
     idx = np.flatnonzero(keep)
     take = np.insert(idx, np.searchsorted(idx, [i for i, _ in gaps], side="right"), -1)
     return Cut(c, take, tuple((float(t[i]), float(t[j])) for i, j in gaps), t.size)
+
+
+def summary_events(summary: Mapping | None) -> list[dict]:
+    """summary.json's scheduled events (dicts with kind, t_s, end_s, ...: issue 45),
+    which errors.png, season.png and the page mark; none without the key (a run
+    without events: nothing is drawn, nothing changes)."""
+    items = (summary or {}).get("events") or []
+    return [e for e in items if isinstance(e, dict) and {"kind", "t_s"} <= set(e)]
+
+
+def shifted(events: list[dict], t0_s: float) -> list[dict]:
+    """``events`` with their times counted from ``t0_s`` (a day axis's first day)."""
+    return [e | {"t_s": e["t_s"] - t0_s}
+            | ({"end_s": e["end_s"] - t0_s} if e.get("end_s") is not None else {})
+            for e in events]

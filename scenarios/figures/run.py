@@ -34,7 +34,7 @@ from ..files.csvio import read_csv
 from ..files.rundir import RunDirError
 from ..workers import worker_pool
 from . import save_figure
-from .marks import cut_at_gaps
+from .marks import cut_at_gaps, shifted, summary_events
 
 # Columns of the comparison arrays: the model's state indices (estimator.linear.model).
 COLUMNS = {"roll": em.R, "yaw": em.Y, "h": em.H_WHEEL, "N_px": em.NPX, "N_pz": em.NPZ,
@@ -127,6 +127,8 @@ def _errors_job(c: dict, gap, title: str, min_gap_s: float, scenario: dict,
     kwargs = {"paper_sigma_deg": eq55, "paper_sigma_label": f"Eq. 55: {eq55:.4f}°",
               "gap_labels": _gap_labels(scenario, min_gap_s), "warnings": _warnings(summary),
               "screened_t_s": c.get("screened_t_s")}
+    if summary_events(summary):     # a run without events: the call of before
+        kwargs["events"] = summary_events(summary)
     if "err_real" not in c:
         series = {n: {"unit": UNITS[n], "estimate": c["x_real"][:, COLUMNS[n]],
                       "sigma": c["sigma"][:, COLUMNS[n]]} for n in UNITS}
@@ -238,8 +240,12 @@ def _run_builders(run_dir: Path) -> tuple[list[str], dict]:
         rows = read_csv(daily)
         if len(rows["day"]) >= 3:
             names.append("season.png")
-            builders["season.png"] = lambda: (plot_season, (rows, title),
-                                              {"warnings": _warnings(summary)})
+            season = {"warnings": _warnings(summary)}
+            if summary_events(summary):
+                # daily.csv's days start at the first row (t = 0 in a run).
+                season["events"] = shifted(summary_events(summary),
+                                           float(cut.source["t_s"][0]))
+            builders["season.png"] = lambda: (plot_season, (rows, title), season)
         if (run_dir / "trim_loop.csv").is_file():
             names.append("trim_loop.png")
             builders["trim_loop.png"] = lambda: (plot_trim_loop, (

@@ -18,6 +18,7 @@ import numpy as np
 from dynprop.estimator.linear import model as em
 
 from ..figures.marks import Cut
+from . import events as ev
 from . import traces as tr
 
 # comparison.npz's columns: the model's state indices (estimator.linear.model), as
@@ -55,11 +56,12 @@ class Axis:
 STARTUP_S = 3600.0
 
 def time_axis(c: Cut, summary: dict, duration_s: float, eclipse: list[tuple[float, float]],
-              min_gap_h: float) -> Axis:
+              min_gap_h: float, events=()) -> Axis:
     """Rows in hours (days beyond three days); shading for the Sun gaps summary.json
     lists, the shorter yaw outages (runs of three days or less: beyond, a year's 700
     noon outages would bury the gaps), the telemetry gaps and the eclipses
-    (truth.csv's ``eclipse``, in seconds)."""
+    (truth.csv's ``eclipse``, in seconds); and the scheduled ``events``
+    (``review.events``: summary.json's, in the rows' seconds), when any."""
     scale, unit = tr.time_unit(duration_s)
     x = c["t_s"] / scale
     gaps = [(a * 3600 / scale, b * 3600 / scale) for a, b in summary.get("sun_gaps_h") or []]
@@ -83,6 +85,8 @@ def time_axis(c: Cut, summary: dict, duration_s: float, eclipse: list[tuple[floa
     shapes += tr.shades(ecl, "eclipse")
     if ecl:
         legend.append(tr.legend_only("eclipse", tr.SHADES["eclipse"]))
+    shapes += ev.shapes(events, scale)
+    legend += ev.legend(events)
     return Axis(x, f"time since epoch ({unit})", shapes, legend, scale,
                 (float(x[0]), float(x[-1])) if len(x) else (0.0, 1.0))
 
@@ -310,13 +314,15 @@ def telemetry(c: dict, ax: Axis) -> Plot | None:
                 {"data": data, "layout": _layout(panels, ax, 170)})
 
 
-def season(daily: dict) -> Plot | None:
+def season(daily: dict, events=(), t0_s: float = 0.0) -> Plot | None:
     """A long run's days (daily.csv): the gap-end yaw error with the filter's ±3σ and
-    Eq. 55's, the daily yaw RMS real and linearized, and the eclipse minutes."""
+    Eq. 55's, the daily yaw RMS real and linearized, and the eclipse minutes; the
+    scheduled ``events`` marked (day k holds t in [t0_s + k, t0_s + k + 1) days, drawn
+    over k ± 0.5: an event falls inside its own day's width)."""
     day = np.asarray(daily.get("day", []), dtype=float)
     if len(day) < 3:
         return None
-    data, panels = [], []
+    data, panels = ev.legend(events), []
     panels.append({"title": "gap-end yaw error (deg)"})
     e, s = daily["gap_end_yaw_error_deg"], daily["gap_end_yaw_sigma_deg"]
     data.append(tr.line(day, e, "gap-end yaw error", tr.COLORS["real"], mode="markers"))
@@ -335,5 +341,6 @@ def season(daily: dict) -> Plot | None:
     caption = "One point per day of the run (daily.csv, every figure at the full sample rate)."
     return Plot("season", "The run's days", caption,
                 {"data": data, "layout": tr.stacked_layout(
-                    panels, "day of the run", 200, x_range=(day[0] - 0.5, day[-1] + 0.5))},
+                    panels, "day of the run", 200, ev.shapes(events, 86400.0, t0_s + 43200.0),
+                    x_range=(day[0] - 0.5, day[-1] + 0.5))},
                 time_axis=False)

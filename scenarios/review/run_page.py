@@ -9,8 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..figures.marks import cut_at_gaps
+from ..figures.marks import cut_at_gaps, summary_events
 from ..files.csvio import read_csv
+from . import events as ev
 from . import provenance, run_figures, verdict
 from .cells import Table, cell, flatten, text, unit_of
 from .render import Page, Section
@@ -147,7 +148,8 @@ def _build(src: Source, command: str | None, requirement_deg: float | None, c) -
     min_gap_h = float((scenario.get("estimator") or {}).get("sun_gap_min_h", 4.0))
     # The figures draw the rows cut at the telemetry gaps; the numbers read every row.
     raw, c = c, cut_at_gaps(c)
-    ax = run_figures.time_axis(c, summary, duration, eclipses(path), min_gap_h)
+    events = summary_events(summary)
+    ax = run_figures.time_axis(c, summary, duration, eclipses(path), min_gap_h, events)
     eq55 = summary.get("analytic_sigma_yaw_deg")
     requirement = requirement_of(scenario, requirement_deg)
     kind = "estimate" if summary.get("telemetry") else "run"
@@ -160,6 +162,8 @@ def _build(src: Source, command: str | None, requirement_deg: float | None, c) -
                                                   "ekf_gap_end_yaw_within_3sigma"))
     tables = [t for t in (_gap_table(summary), _checks_table(summary)) if t is not None]
     sections = [Section("verdict", "Verdict", _verdict_intro(summary), verdicts, tables)]
+    if events:
+        sections.append(Section("events", "Events", EVENTS_INTRO, tables=[ev.table(events)]))
 
     figures = [run_figures.errors(c, ax, eq55)]
     sections.append(Section("errors", "Errors", plots=figures))
@@ -167,7 +171,9 @@ def _build(src: Source, command: str | None, requirement_deg: float | None, c) -
                          run_figures.telemetry(c, ax)) if p is not None]
     for p in extra:
         sections.append(Section(p.id, p.title.split(":")[0], plots=[p]))
-    days = run_figures.season(daily) if daily is not None else None
+    # daily.csv's days start at the first row (t = 0 in a run).
+    days = run_figures.season(daily, events, float(raw["t_s"][0])) \
+        if daily is not None else None
     tables = [_summary_table(summary)]
     if daily is not None:
         tables.append(_daily_table(daily))
@@ -178,6 +184,11 @@ def _build(src: Source, command: str | None, requirement_deg: float | None, c) -
                 f"{duration / 86400:.3g} days, filters {', '.join(summary.get('filters') or [])}"
                 f", dynprop {summary.get('dynprop_version')}")
     return Page(title, kind, subtitle, sections)
+
+
+EVENTS_INTRO = ("The scenario's scheduled events (every occurrence of a periodic one), also "
+                "marked on every time figure: a band over a thruster firing or a sensor "
+                "outage, a dashed line at a command.")
 
 
 def _verdict_intro(summary: dict) -> str:

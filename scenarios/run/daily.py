@@ -12,21 +12,27 @@ from dynprop.estimator.linear.model import H_WHEEL, R, Y
 
 from ..records import Window
 from ..units import DAY_S, RAD2DEG
+from .event_days import day_columns
 
 
 class DailyTally:
     """One row of daily.csv per simulated day (day k: t in [k, k+1) days)."""
 
     def __init__(self, s, epoch, n_samples: int, eq55_deg: float,
-                 span_s: tuple[float, float] | None = None):
+                 span_s: tuple[float, float] | None = None, events=(), t0_s: float = 0.0):
         """``span_s``: a file off the scenario's grid, its first and last sample's
-        times; its days and gaps are then counted by time, not by index."""
+        times; its days and gaps are then counted by time, not by index.  ``events``:
+        summary.json's list (``event_days``), counted per day from ``t0_s``, the first
+        sample's time; none adds no column."""
         dt = s.sample_interval_s
         self.dt = dt
         self.span = span_s
         # The run's last sample, at exactly k days, closes day k−1 (a year has 365 rows).
         length = (n_samples - 1) * dt if span_s is None else span_s[1] - span_s[0]
         self.n_days = max(1, int(np.ceil(length / DAY_S - 1e-9)))
+        self.events = list(events)
+        self.t0 = t0_s if span_s is None else span_s[0]
+        self.length = length
         self.shadow_known = True
         self.epoch, self.eq55 = epoch, eq55_deg
         d = self.n_days
@@ -95,7 +101,7 @@ class DailyTally:
         doy = np.array([(self.epoch + timedelta(days=int(k))).timetuple().tm_yday for k in d],
                        dtype=float)
         to_h = self.dt / 3600.0 if self.span is None else 1.0
-        return {
+        out = {
             "day": d.astype(float), "day_of_year": doy,
             "sun_gap_start_h": self.gap[:, 0] * to_h, "sun_gap_end_h": self.gap[:, 1] * to_h,
             "sun_gap_length_h": (self.gap[:, 1] - self.gap[:, 0]) * to_h,
@@ -108,3 +114,6 @@ class DailyTally:
             "yaw_error_rms_linear_deg": mean("yaw_linear", True),
             "yaw_error_rms_real_minus_linear_deg": mean("diff", True),
         }
+        if self.events:     # without events, the columns of before issue 45 alone
+            out |= day_columns(self.events, self.n_days, self.t0, self.t0 + self.length)
+        return out

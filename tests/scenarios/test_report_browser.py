@@ -43,7 +43,8 @@ CHEAP = ("--set", "sample_interval_s=1.024", "--set", "output.telemetry=false")
 # The linearization page is drawn from the session's 13 h report (conftest's
 # linearization_13h, test_linearization.py's): one whole Sun gap, the same page as two
 # days (the same sections, figures and traces) in a third of the time.
-KINDS = ["d2", "d30", "mc", "lin", "year"]
+# ev: the 2-day run's page with scheduled events (issue 45) in its summary.json.
+KINDS = ["d2", "ev", "d30", "mc", "lin", "year"]
 TIMINGS: dict[str, float] = {}
 
 
@@ -70,6 +71,33 @@ def _make(tmp_path_factory, name: str, *command) -> Path:
 @pytest.fixture(scope="module")
 def d2(tmp_path_factory):
     return _make(tmp_path_factory, "d2", "run", SCENARIO)
+
+
+# Scheduled events inside the two days, as summary.json lists them (issue 45): every
+# kind, a firing across midnight.
+EVENTS = [
+    {"kind": "sensor_outage", "t_s": 3600.0, "end_s": 4800.0, "utc": "2026-03-20T13:00:00Z",
+     "label": None, "sensor": "earth"},
+    {"kind": "trim_tab", "t_s": 36000.0, "end_s": 36000.0, "utc": "2026-03-20T22:00:00Z",
+     "label": "tab trim", "angle_deg": 2.5},
+    {"kind": "thruster", "t_s": 86000.0, "end_s": 87000.0, "utc": "2026-03-21T11:53:20Z",
+     "label": "east-west station keeping", "torque_Nm": [1e-3, 0.0, 2e-3]},
+    {"kind": "wheel_switch", "t_s": 88000.0, "end_s": 88000.0, "utc": "2026-03-21T12:26:40Z",
+     "label": None},
+    {"kind": "array_offset", "t_s": 150000.0, "end_s": 150000.0,
+     "utc": "2026-03-22T05:40:00Z", "label": None, "angle_deg": -1.0},
+]
+
+
+@pytest.fixture(scope="module")
+def ev(d2, tmp_path_factory):
+    """The 2-day run with ``EVENTS`` in its summary.json, its page drawn on a copy."""
+    import json
+    out = Path(shutil.copytree(d2.parent, tmp_path_factory.mktemp("ev") / "out"))
+    summary = json.loads((out / "summary.json").read_text())
+    (out / "summary.json").write_text(json.dumps(summary | {"events": EVENTS}))
+    TIMINGS["ev: dynprop report"] = _run(DYNPROP, "report", out)
+    return out / "report.html"
 
 
 @pytest.fixture(scope="module")
@@ -200,6 +228,68 @@ def test_year_page_is_small_and_quick(pages, year):
     assert ms is not None, f"year: never drawn:\n{_console(o)}"
     assert ms <= MAX_YEAR_DRAWN_MS, (f"year: drawn {ms:.0f} ms after navigation "
                                      f"(> {MAX_YEAR_DRAWN_MS})")
+
+
+EVENTS_JS = r"""
+var rows = Array.from(document.querySelectorAll("#event-list tbody tr")).map(function (tr) {
+  return Array.from(tr.cells).map(function (td) { return td.textContent.trim(); }); });
+var figs = Array.from(document.querySelectorAll("div.plot")).map(function (div) {
+  var fl = div._fullLayout, xa = fl.xaxis, at = div.getBoundingClientRect();
+  var marks = [];
+  (fl.shapes || []).forEach(function (s, i) {
+    if ((s.name || "").indexOf("event: ") !== 0) { return; }
+    var p = div.querySelector('.shapelayer path[data-index="' + i + '"]');
+    var box = p ? p.getBoundingClientRect() : null;
+    marks.push({kind: s.name.slice(7), x0: s.x0, x1: s.x1, drawn: !!(p && p.getAttribute("d")),
+                left: box ? box.left - at.left : null, width: box ? box.width : 0,
+                top: box ? box.top - at.top : null, bottom: box ? box.bottom - at.top : null,
+                px0: xa._offset + xa.d2p(s.x0), plot_top: fl._size.t,
+                plot_bottom: fl._size.t + fl._size.h});
+  });
+  var legend = Array.from(div.querySelectorAll(".legend .traces .legendtext"))
+    .map(function (t) { return t.textContent; });
+  return {id: div.id, time: !!document.querySelector(
+            'script.plot-spec[data-target="' + div.id + '"][data-time-axis="1"]'),
+          marks: marks, legend: legend};
+});
+return {rows: rows, figs: figs};
+"""
+
+
+def test_events_are_listed_and_marked_in_the_browser(pages, browser):
+    """The events page as Chromium draws it: a table row per event (its kind, start
+    and label), and on every time figure and the season's a drawn shape per event, a
+    band over each duration and a line at each command, where the x axis puts its
+    start, from the top of the plot area to its bottom; the legend names each kind
+    once."""
+    o = pages("ev")
+    assert o.drawn_ms is not None, f"ev: never drawn:\n{_console(o)}"
+    d = browser.driver
+    if d.current_url != o.url:
+        o = browser.open(o.path)
+    got = d.execute_script(EVENTS_JS)
+    assert len(got["rows"]) == len(EVENTS), got["rows"]
+    for row, e in zip(got["rows"], EVENTS, strict=True):
+        assert row[1] == e["kind"] and row[2] == e["utc"], row
+        assert row[-1] == (e["label"] or "—"), row
+    figs = [f for f in got["figs"] if f["time"]]
+    assert len(figs) >= 4, [f["id"] for f in got["figs"]]
+    for f in figs:
+        kinds = sorted(m["kind"] for m in f["marks"])
+        assert kinds == sorted(e["kind"] for e in EVENTS), (f["id"], kinds)
+        for m, e in zip(sorted(f["marks"], key=lambda m: m["x0"]), EVENTS, strict=True):
+            # Across every panel: from the plot area's top to its bottom.
+            assert m["drawn"], (f["id"], m)
+            assert abs(m["top"] - m["plot_top"]) <= 2.0, (f["id"], m)
+            assert abs(m["bottom"] - m["plot_bottom"]) <= 2.0, (f["id"], m)
+            assert m["x0"] == pytest.approx(e["t_s"] / 3600.0), (f["id"], m)
+            assert abs(m["left"] - m["px0"]) <= 2.0, (f["id"], m)   # drawn where x0 is
+            if e["end_s"] > e["t_s"]:
+                assert m["x1"] == pytest.approx(e["end_s"] / 3600.0) and m["width"] >= 1
+        for word in ("thruster", "sensor outage", "trim-tab", "offset", "backup yaw wheel"):
+            assert sum(word in t for t in f["legend"]) == 1, (f["id"], word, f["legend"])
+    # The page without events (test_event_marks.py checks its figures have no mark).
+    assert 'id="event-list"' not in pages("d2").path.read_text()
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -23,6 +23,7 @@ from ...files.summary import eq55_sigma_yaw_deg
 from ...records import Window
 from ...samples import nees_rows, output_rows
 from ..daily import DailyTally
+from ..event_days import event_dicts
 from ..filter_tally import FilterTally
 from ..filtering import count_rejected
 from ..pitch import PitchTally
@@ -48,7 +49,7 @@ class Engine:
         self.tally = RunTally(s, truth, twin, step_s, t0_s)
         self.pitch = PitchTally(s)
         self.daily = DailyTally(s, build.epoch(s), n, eq55_sigma_yaw_deg(s, self.params),
-                                span_s)
+                                span_s, event_dicts(s), t0_s)
         self.comparison = ComparisonRows(self.stage / ".comparison", n, plan.stride)
         self.estimate = CsvAppender(self.stage / "estimate.csv")
         self.smoothed = CsvAppender(self.stage / "smoothed.csv") if smoothed else None
