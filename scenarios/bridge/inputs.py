@@ -184,7 +184,7 @@ def padded_filter_inputs(s: Scenario, params, prev_tail: Measured | None, cur: M
     the padded samples' times, off the grid, and ``record`` their file's cadence and
     first time, ``prepared_inputs``')."""
     joined, sl = join_padded(prev_tail, cur, nxt, pad)
-    meas, u, extra = filter_inputs(s, params, *Measured(*joined).readings, t_s=t_s,
+    meas, u, extra = filter_inputs(s, params, *Measured(*joined), t_s=t_s,
                                    record=record)
     meas = type(meas)(*(v[sl] if np.ndim(v) else v for v in
                         (meas.roll_rad, meas.yaw_rad, meas.h_Nms, meas.var_roll, meas.var_yaw,

@@ -65,7 +65,7 @@ class EkfStream:
 
     @staticmethod
     def _telemetry(w: TruthWindow) -> tuple:
-        return (*w.measured.readings, w.pitch_rad)
+        return (*w.measured, w.pitch_rad)
 
     def window(self, cur: TruthWindow, nxt: TruthWindow | None, pad: int, record=None
                ) -> EkfResult:
@@ -74,8 +74,8 @@ class EkfStream:
         t_pad = None
         if cur.lead is not None:
             # A telemetry file's window, with its own padding (``records.TruthWindow``).
-            prev = (*cur.lead.measured.readings, cur.lead.pitch_rad)
-            after, pad = (*cur.trail.measured.readings, cur.trail.pitch_rad), len(cur.trail.t_s)
+            prev = (*cur.lead.measured, cur.lead.pitch_rad)
+            after, pad = (*cur.trail.measured, cur.trail.pitch_rad), len(cur.trail.t_s)
             if cur.steps is not None:
                 t_pad = np.concatenate([cur.lead.t_s, cur.t_s, cur.trail.t_s])
         inputs = padded_ekf_inputs(self.s, self.params, prev, self._telemetry(cur), after, pad,

@@ -121,7 +121,7 @@ def estimate_to_directory(s: Scenario, grid, truth, stage: Path, sources: dict) 
     disc = (discretize(params, noise, s.sample_interval_s) if grid.regular
             else StepTable(params, noise, grid.steps))
     measured = telemetry_inputs(s, grid.columns)
-    real, smoother_args = filter_telemetry(s, params, disc, *measured.readings,
+    real, smoother_args = filter_telemetry(s, params, disc, *measured,
                                            t_s=None if grid.regular else t)
     smoothed = paper_smoother(design_of(s), real, disc, **smoother_args)
     sparse = truth is not None and not truth.every_sample(n)

@@ -125,7 +125,7 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
         seen = measured(tel)
     else:
         seen = telemetry_inputs(s, telemetry_columns)
-    real, smoother_args = filter_telemetry(s, params, disc, *seen.readings, rows=rows)
+    real, smoother_args = filter_telemetry(s, params, disc, *seen, rows=rows)
     twin_model = twin_tel = linear = None
     if twin:
         twin_model, twin_tel, twin_params = linear_twin(truth_scenario, truth, run, mt, tt)
@@ -134,7 +134,7 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
             # the nominal ω_n.
             twin_model = twin_model.copy()
             twin_model[:, [1, 3]] *= twin_params.omega_n_radps / params.omega_n_radps
-        linear, _ = filter_telemetry(s, params, disc, *measured(twin_tel).readings,
+        linear, _ = filter_telemetry(s, params, disc, *measured(twin_tel),
                                      rows=rows)
     smoothed = paper_smoother(design_of(s), real, disc, **smoother_args) if smooth else None
     pitch = tel.pitch_rad if telemetry_columns is None else telemetry_columns["pitch_deg"] * DEG

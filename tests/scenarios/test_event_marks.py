@@ -124,8 +124,12 @@ def runs(tmp_path_factory):
     return out
 
 
-def test_event_dicts_is_empty_without_events():
-    assert event_days.event_dicts(object()) == []
+def test_event_dicts_is_empty_without_events_and_is_the_summarys_with_them():
+    from dynprop.scenarios.config.loader import load_scenario
+    from dynprop.scenarios.files.summary import events_list
+    assert event_days.event_dicts(load_scenario("goes_next_equinox")) == []
+    s = load_scenario("goes_next_events")
+    assert event_days.event_dicts(s) == events_list(s) and len(events_list(s)) == 4
 
 
 @pytest.mark.surface

@@ -109,7 +109,7 @@ def test_solar_loop_eigenvalues_match_the_hand_derivation():
         law = SolarManagement(torque_gain=g, momentum_time_constant_s=tau_days * 86400.0)
         T = law.period_s
 
-        def day(state):
+        def day(state, law=law, T=T):
             h, n = state[:2], state[2:]
             dk = command(law, h, n, directions)
             n_next = n + directions @ dk
