@@ -32,6 +32,7 @@ class Measured(NamedTuple):
     yaw_sigma_rad: np.ndarray | None
     sun_head: np.ndarray | None
     maneuver: np.ndarray | None = None
+    known_Nm: np.ndarray | None = None   # (N, 2) roll, yaw torques known (estimator.known_torques)
 
     @property
     def readings(self) -> tuple:

@@ -45,14 +45,21 @@ class TruthTorques:
     torque_states: np.ndarray
     res_x: np.ndarray
     res_z: np.ndarray
+    known: np.ndarray | None = None   # (N, 2) the torques the filter knows, or None
 
 
-def truth_torques(truth, model_torques, omega0_radps: float) -> TruthTorques:
+def truth_torques(truth, model_torques, omega0_radps: float,
+                  known_Nm: np.ndarray | None = None) -> TruthTorques:
+    """The split above; ``known_Nm`` (N, 2), roll and yaw torques the filter takes as
+    known (``estimator.known_torques``), is left out of the torque states' truth as
+    the modelled torques are (the filter's torque states estimate what remains)."""
     ext = external_torque(truth)
     mt = model_torques
-    states, res_x, res_z = em.project_torques(truth.t_s, ext[:, 0] - mt.roll_Nm,
-                                              ext[:, 2] - mt.yaw_Nm, omega0_radps)
-    return TruthTorques(euler312_rates(truth.euler_rad, truth.w_br_radps), states, res_x, res_z)
+    kx, kz = (0.0, 0.0) if known_Nm is None else (known_Nm[:, 0], known_Nm[:, 1])
+    states, res_x, res_z = em.project_torques(truth.t_s, ext[:, 0] - mt.roll_Nm - kx,
+                                              ext[:, 2] - mt.yaw_Nm - kz, omega0_radps)
+    return TruthTorques(euler312_rates(truth.euler_rad, truth.w_br_radps), states, res_x, res_z,
+                        known_Nm)
 
 
 def _attitude_columns(truth, rates: np.ndarray, omega_n: float, rows) -> list[np.ndarray]:

@@ -26,6 +26,7 @@ from dynprop.sim.telemetry import Telemetry
 
 from ..config import build
 from ..config.schema import Scenario
+from ..files.columns import TORQUER_COLUMNS
 from ..records import Measured
 from ..units import DEG, RPM2RADPS
 
@@ -151,15 +152,33 @@ def telemetry_inputs(s: Scenario, cols: dict[str, np.ndarray]) -> Measured:
         # which would make the filter badly over-confident on CASS yaw.
         sigma = np.full(len(cols["t_s"]), FALLBACK_YAW_SIGMA_DEG * DEG)
     head = cols.get("sun_head")
+    dipoles = np.column_stack([cols[k] for k in TORQUER_COLUMNS]) \
+        if all(k in cols for k in TORQUER_COLUMNS) else None
     return Measured(cols["roll_deg"] * DEG, cols["yaw_deg"] * DEG, speeds, sigma, head,
-                    cols.get("maneuver"))
+                    cols.get("maneuver"), known_torques(s, dipoles))
 
 
-def measured(tel: Telemetry) -> Measured:
-    """Simulated telemetry as the filter reads it (the Sun head NaN where none)."""
+def measured(tel: Telemetry, known_Nm: np.ndarray | None = None) -> Measured:
+    """Simulated telemetry as the filter reads it (the Sun head NaN where none), with
+    the torques the ground knows (``known_torques``), if any."""
     head = np.where(tel.yaw_head >= 0, tel.yaw_head, np.nan)
     return Measured(tel.roll_rad, tel.yaw_rad, tel.wheel_speeds_radps, tel.yaw_sigma_rad, head,
-                    tel.maneuver)
+                    tel.maneuver, known_Nm)
+
+
+def known_torques(s: Scenario, dipole_Am2: np.ndarray | None) -> np.ndarray | None:
+    """The roll and yaw torques the ground knows per sample (N, 2), for the filter's
+    N_x*, N_z* (Eq. 9): with 'magnetic_control' in ``estimator.known_torques``, the
+    commanded dipoles m × the field model B_R at Earth pointing (body = orbit frame;
+    a degree of attitude error changes the torque by under 2%).  None when none is
+    known."""
+    if "magnetic_control" not in s.estimator.known_torques:
+        return None
+    if dipole_Am2 is None:
+        raise ValueError("estimator.known_torques: magnetic_control needs the torquers' "
+                         f"dipoles ({', '.join(TORQUER_COLUMNS)}), and the telemetry has none")
+    torque = np.cross(np.asarray(dipole_Am2, dtype=float), build.field_orbit_frame(s))
+    return torque[:, [0, 2]]
 
 
 def join_padded(prev_tail: tuple | None, cur: tuple, nxt: tuple | None, pad: int

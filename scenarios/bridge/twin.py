@@ -33,8 +33,10 @@ def twin_input(params, model_torques, tt: TruthTorques, h_Nms, dt_s: float,
     the true N_w, the mean of ḣ over each step (``coordinates.step_rates``; the last
     step needs the next window's first h, ``h_next``)."""
     mt = model_torques
-    return em.input_vector(params, mt.roll_Nm + tt.res_x, mt.yaw_Nm + tt.res_z,
-                           step_rates(h_Nms, dt_s, h_next))
+    nx, nz = mt.roll_Nm + tt.res_x, mt.yaw_Nm + tt.res_z
+    if tt.known is not None:   # the known torques drive the twin as the filter's inputs
+        nx, nz = nx + tt.known[:, 0], nz + tt.known[:, 1]
+    return em.input_vector(params, nx, nz, step_rates(h_Nms, dt_s, h_next))
 
 
 @dataclass(frozen=True)

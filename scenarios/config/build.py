@@ -8,7 +8,15 @@ from datetime import datetime
 
 import numpy as np
 from dynprop.estimator.linear.model import ModelParams, ProcessNoise
-from dynprop.sim import control, disturbance, environment, ephemeris, sensors, spacecraft
+from dynprop.sim import (
+    control,
+    disturbance,
+    environment,
+    ephemeris,
+    geomag,
+    sensors,
+    spacecraft,
+)
 from dynprop.sim.events import Schedule
 from dynprop.sim.frames import GeoOrbit
 from dynprop.sim.truth import InitialState, TruthStream
@@ -68,6 +76,16 @@ def epoch(s: Scenario) -> datetime:
 
 def orbit(s: Scenario) -> GeoOrbit:
     return GeoOrbit(longitude_rad=s.orbit.longitude_deg * DEG, radius_m=s.orbit.radius_m)
+
+
+def field_orbit_frame(s: Scenario) -> np.ndarray:
+    """The geomagnetic field at the station in the orbit frame (T), the model the
+    truth's torquers fly in (``sim.step.pack_params``)."""
+    o, mag = orbit(s), build_environment(s).magnetic
+    return geomag.geo_field_orbit_frame(o.longitude_rad, o.radius_m,
+                                        moment_Am2=mag.earth_dipole_Am2,
+                                        pole_lat_deg=mag.pole_lat_deg,
+                                        pole_lon_deg=mag.pole_lon_deg)
 
 
 def build_spacecraft(s: Scenario) -> spacecraft.Spacecraft:

@@ -148,6 +148,11 @@ class Estimator(_Section):
     process_noise: ProcessNoise = Field(default_factory=ProcessNoise)
     initial_sigma: InitialSigma = Field(default_factory=InitialSigma)
     model_torques: ModelTorques = Field(default_factory=ModelTorques)
+    known_torques: list[Literal["magnetic_control"]] = Field(
+        [], description="torques the ground knows per sample and the filter takes as "
+        "modelled N_x*, N_z* (Eq. 9) beside model_torques: 'magnetic_control', the "
+        "torquers' commanded dipoles (telemetry.csv's torquer_{x,y,z}_Am2) crossed with "
+        "the field model at Earth pointing; `dynprop run` and `montecarlo` only")
     wheel_torque_window_s: float = Field(20.0, gt=0, le=600, description="Savitzky–Golay "
                                          "window for N_w* = ḣ from the tachometers (s)")
     sun_gap_min_h: float = Field(4.0, gt=0, description="a yaw outage at least this long "

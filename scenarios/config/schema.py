@@ -211,6 +211,7 @@ _LATER_KEYS = (*((("sensors", *head), key, default) for head in
                  for key, default in (("outlier_rate", 0.0), ("outlier_size", 20.0))),
                (("estimator",), "outlier_gate_chi2", None),
                (("estimator",), "maneuver", ManeuverResponse().model_dump(mode="json")),
+               (("estimator",), "known_torques", []),
                # The array offset (issue 45): absent means the paper's array, Sun-normal.
                (("environment", "solar"), "array_offset_deg", 0.0),
                (("environment", "solar"), "offset_effectiveness_Nm_per_deg", 5e-7),

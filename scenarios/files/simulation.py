@@ -9,7 +9,14 @@ from pathlib import Path
 import numpy as np
 
 from ..config.schema import Scenario, resolved_yaml
-from .columns import UtcTags, telemetry_columns, telemetry_lattices, truth_columns
+from .columns import (
+    UtcTags,
+    telemeters_torquers,
+    telemetry_columns,
+    telemetry_lattices,
+    torquer_columns,
+    truth_columns,
+)
 from .csvio import write_csv
 
 
@@ -26,6 +33,8 @@ def write_simulation(stage: Path, sim, show_progress: bool | None = None,
     (stage / "scenario.yaml").write_text(resolved_yaml(scenario or sim.scenario))
     truth = truth_columns(sim.truth, sim.telemetry.sun_visible)
     tel = telemetry_columns(sim.telemetry, sim.suite)
+    if telemeters_torquers(sim.scenario):
+        tel.update(torquer_columns(sim.truth.torquer_dipole_Am2))
     lattices = telemetry_lattices(sim.suite, sim.telemetry.wheel_speeds_radps.shape[1])
     # The epoch line and time_utc column say when t_s is (the simulated scenario's epoch).
     tags = UtcTags.of(sim.scenario.epoch_utc, sim.scenario.sample_interval_s)

@@ -16,7 +16,7 @@ from dynprop.estimator.linear import model as em
 from dynprop.estimator.linear.transition import discretize
 
 from ..bridge.coordinates import model_truth, pitch_truth, truth_torques
-from ..bridge.inputs import filter_inputs, initial_prior, telemetry_inputs
+from ..bridge.inputs import filter_inputs, initial_prior, known_torques, telemetry_inputs
 from ..bridge.twin import linear_twin, measured
 from ..config import build
 from ..config.schema import Scenario
@@ -80,7 +80,7 @@ def pitch_history(s: Scenario, pitch_rad, speeds, truth: np.ndarray | None, t_s=
 
 
 def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=None,
-                     sun_head=None, maneuver=None, rows=None, t_s=None
+                     sun_head=None, maneuver=None, known_Nm=None, rows=None, t_s=None
                      ) -> tuple[FilterResult, dict]:
     """Preprocess telemetry arrays and run the filter; returns the result (the
     history only at ``rows`` if given) and what the smoother needs besides it
@@ -89,7 +89,7 @@ def filter_telemetry(s: Scenario, params, disc, roll, yaw, speeds, yaw_sigma=Non
     ``t_s``: the samples' own times when they are off the scenario's grid (``disc``
     then a ``StepTable``)."""
     meas, u, extra = filter_inputs(s, params, roll, yaw, speeds, yaw_sigma, sun_head,
-                                   maneuver, t_s=t_s)
+                                   maneuver, known_Nm, t_s=t_s)
     x0, P0 = initial_prior(s, params)
     design = design_of(s)
     result = paper_filter(design, meas, disc, x0, P0, u, extra, sun_head, rows=rows)
@@ -118,13 +118,13 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
     params, noise = build.estimator_model(s)
     disc = discretize(params, noise, dt)
     mt = s.estimator.model_torques
-    tt = truth_torques(truth, mt, params.omega0_radps)
-    truth_model = model_truth(params, truth, tt)
-
     if telemetry_columns is None:
-        seen = measured(tel)
+        seen = measured(tel, known_torques(s, truth.torquer_dipole_Am2))
     else:
         seen = telemetry_inputs(s, telemetry_columns)
+    tt = truth_torques(truth, mt, params.omega0_radps, seen.known_Nm)
+    truth_model = model_truth(params, truth, tt)
+
     real, smoother_args = filter_telemetry(s, params, disc, *seen, rows=rows)
     twin_model = twin_tel = linear = None
     if twin:
@@ -134,7 +134,7 @@ def run_scenario(s: Scenario, sim: Simulation | None = None,
             # the nominal ω_n.
             twin_model = twin_model.copy()
             twin_model[:, [1, 3]] *= twin_params.omega_n_radps / params.omega_n_radps
-        linear, _ = filter_telemetry(s, params, disc, *measured(twin_tel),
+        linear, _ = filter_telemetry(s, params, disc, *measured(twin_tel, seen.known_Nm),
                                      rows=rows)
     smoothed = paper_smoother(design_of(s), real, disc, **smoother_args) if smooth else None
     pitch = tel.pitch_rad if telemetry_columns is None else telemetry_columns["pitch_deg"] * DEG

@@ -31,7 +31,14 @@ from ...bridge.inputs import telemetry_inputs
 from ...bridge.twin import TwinTruth, twin_window
 from ...config import build
 from ...config.schema import Scenario
-from ...files.columns import UtcTags, telemetry_columns, telemetry_lattices, truth_columns
+from ...files.columns import (
+    UtcTags,
+    telemeters_torquers,
+    telemetry_columns,
+    telemetry_lattices,
+    torquer_columns,
+    truth_columns,
+)
 from ...files.csvio import CsvAppender
 from ...records import TruthWindow
 from ...samples import output_rows
@@ -82,6 +89,7 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 lattices=telemetry_lattices(suite, stream.spacecraft.n_wheels),
                 tags=UtcTags.of(s.epoch_utc, s.sample_interval_s))
     twin_filter = TwinFilter(s, params, disc, plan)
+    torquers = telemeters_torquers(s)
     loop = None if steering is None else steering.start(s, stream, out)
     if out is not None and stream.manager is not None:
         files["management"] = CsvAppender(Path(out) / MANAGEMENT_FILE)
@@ -107,9 +115,13 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 # time; the twin's sensors read the same draws again (its generators
                 # would repeat them: the same seeds).
                 truth, tel, drawn = sense_window(stream, a, b, suite, rngs, draws, min_sep)
-                tt = truth_torques(truth, s.estimator.model_torques, params.omega0_radps)
                 rows = output_rows(a, b, plan.stride) - a
                 tel_cols = telemetry_columns(tel, suite)
+                if torquers:
+                    tel_cols.update(torquer_columns(truth.torquer_dipole_Am2))
+                seen = telemetry_inputs(s, tel_cols)
+                tt = truth_torques(truth, s.estimator.model_torques, params.omega0_radps,
+                                   seen.known_Nm)
                 if loop is not None:   # may move the truth's tab for the next window
                     loop.add(truth, tel_cols, plan.is_last(index))
                 if "management" in files and len(stream.manager.history) > logged:
@@ -120,7 +132,7 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 unwritten.append((index, truth_columns(truth, tel.sun_visible, rows),
                                   tel_cols))
                 real = TruthWindow(
-                    index, a, b, truth.t_s, telemetry_inputs(s, tel_cols),
+                    index, a, b, truth.t_s, seen,
                     # The pitch filter and the EKF measure the Earth sensor's pitch.
                     tel_cols["pitch_deg"] * DEG,
                     {k: v[rows] for k, v in tel_cols.items()}, model_truth(params, truth, tt),
@@ -133,6 +145,8 @@ def producer(s: Scenario, run: int = 0, window_samples: int | None = None,
                 h_next = None if current is None else current.truth.h_Nms[0]
                 twin, measured, twin_x = twin_window(s, params, disc, pending.truth, pending.tt,
                                                      h_next, twin_x, pending.drawn, suite)
+                # The twin's filter knows the torques the real one does.
+                measured = measured._replace(known_Nm=pending.tt.known)
                 twin_rec = TwinTelemetry(pending.index, pending.start, len(pending.truth.t_s),
                                          twin, measured)
                 pending = None   # what it kept of the truth is not needed any more
