@@ -25,8 +25,8 @@ from dynprop.estimator.linear.transition import discretize
 from dynprop.sim.telemetry import Telemetry
 
 from ..config import build
+from ..config.management import TORQUER_COLUMNS
 from ..config.schema import Scenario
-from ..files.columns import TORQUER_COLUMNS
 from ..records import Measured
 from ..units import DEG, RPM2RADPS
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
+import numpy as np
 from dynprop.sim.momentum import DAY_S, SolarManagement
 from pydantic import Field, Strict, model_validator
 
@@ -73,3 +74,19 @@ class MomentumManagement(_Section):
         out["solar"] = self.solar.model_dump() | (
             {"file": file} if self.solar.enabled else {})
         return out
+
+
+TORQUER_COLUMNS = ("torquer_x_Am2", "torquer_y_Am2", "torquer_z_Am2")
+
+
+def telemeters_torquers(s) -> bool:
+    """Whether telemetry.csv carries the torquers' commanded dipoles: when the filter
+    takes them as known, or the torquers manage the momentum's direction (a managed
+    spacecraft telemeters its commands).  Never otherwise, so every other run writes
+    the columns it always wrote."""
+    return ("magnetic_control" in s.estimator.known_torques
+            or s.momentum_management.magnetic.enabled)
+
+
+def torquer_columns(dipole_Am2: np.ndarray) -> dict[str, np.ndarray]:
+    return {name: dipole_Am2[:, k] for k, name in enumerate(TORQUER_COLUMNS)}

@@ -13,22 +13,6 @@ from dynprop.sim.ephemeris import parse_epoch
 
 from ..units import RAD2DEG, RADPS2RPM
 
-TORQUER_COLUMNS = ("torquer_x_Am2", "torquer_y_Am2", "torquer_z_Am2")
-
-
-def telemeters_torquers(s) -> bool:
-    """Whether telemetry.csv carries the torquers' commanded dipoles: when the filter
-    takes them as known, or the torquers manage the momentum's direction (a managed
-    spacecraft telemeters its commands).  Never otherwise, so every other run writes
-    the columns it always wrote."""
-    return ("magnetic_control" in s.estimator.known_torques
-            or s.momentum_management.magnetic.enabled)
-
-
-def torquer_columns(dipole_Am2: np.ndarray) -> dict[str, np.ndarray]:
-    return {name: dipole_Am2[:, k] for k, name in enumerate(TORQUER_COLUMNS)}
-
-
 # Estimate columns: state name with its unit, and the factor from model units
 # (ṙ/ω_n and ẏ/ω_n are written as rates in deg/s).
 STATE_COLUMNS = ("roll_deg", "roll_rate_degps", "yaw_deg", "yaw_rate_degps", "h_Nms",

@@ -8,13 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config.management import telemeters_torquers, torquer_columns
 from ..config.schema import Scenario, resolved_yaml
 from .columns import (
     UtcTags,
-    telemeters_torquers,
     telemetry_columns,
     telemetry_lattices,
-    torquer_columns,
     truth_columns,
 )
 from .csvio import write_csv

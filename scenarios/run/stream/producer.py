@@ -30,13 +30,12 @@ from ...bridge.coordinates import TruthTorques, model_truth, pitch_truth, truth_
 from ...bridge.inputs import telemetry_inputs
 from ...bridge.twin import TwinTruth, twin_window
 from ...config import build
+from ...config.management import telemeters_torquers, torquer_columns
 from ...config.schema import Scenario
 from ...files.columns import (
     UtcTags,
-    telemeters_torquers,
     telemetry_columns,
     telemetry_lattices,
-    torquer_columns,
     truth_columns,
 )
 from ...files.csvio import CsvAppender
