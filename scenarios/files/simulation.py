@@ -19,6 +19,16 @@ from .columns import (
 from .csvio import write_csv
 
 
+def simulated_telemetry(sim) -> dict[str, np.ndarray]:
+    """telemetry.csv's columns of a ``run.simulate.Simulation``: the sensors', and the
+    torquers' commanded dipoles when the scenario telemeters them
+    (``config.management.telemeters_torquers``)."""
+    tel = telemetry_columns(sim.telemetry, sim.suite)
+    if telemeters_torquers(sim.scenario):
+        tel.update(torquer_columns(sim.truth.torquer_dipole_Am2))
+    return tel
+
+
 def write_simulation(stage: Path, sim, show_progress: bool | None = None,
                      truth_writer=None, scenario: Scenario | None = None
                      ) -> dict[str, np.ndarray]:
@@ -31,9 +41,7 @@ def write_simulation(stage: Path, sim, show_progress: bool | None = None,
     Carlo case records its nominal scenario)."""
     (stage / "scenario.yaml").write_text(resolved_yaml(scenario or sim.scenario))
     truth = truth_columns(sim.truth, sim.telemetry.sun_visible)
-    tel = telemetry_columns(sim.telemetry, sim.suite)
-    if telemeters_torquers(sim.scenario):
-        tel.update(torquer_columns(sim.truth.torquer_dipole_Am2))
+    tel = simulated_telemetry(sim)
     lattices = telemetry_lattices(sim.suite, sim.telemetry.wheel_speeds_radps.shape[1])
     # The epoch line and time_utc column say when t_s is (the simulated scenario's epoch).
     tags = UtcTags.of(sim.scenario.epoch_utc, sim.scenario.sample_interval_s)

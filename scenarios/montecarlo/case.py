@@ -22,7 +22,8 @@ from dynprop.estimator.pitch.filter import unpack as pitch_unpack
 
 from ..config import build
 from ..config.schema import Scenario
-from ..files.columns import PITCH_FACTORS, display_factors, telemetry_columns
+from ..files.columns import PITCH_FACTORS, display_factors
+from ..files.simulation import simulated_telemetry
 from ..run.ekf import other_filters
 from ..run.filtering import BiasedResult, design_of, filter_section
 from ..run.simulate import simulate
@@ -190,7 +191,7 @@ def run_case(s: Scenario, case: int, keep_full: bool = False) -> dict:
         dispersed, flying = draw_case(s, case)
         sim = simulate(flying, run=case)
         # The filter sees the telemetry exactly as `dynprop run` writes it.
-        cols = telemetry_columns(sim.telemetry, sim.suite)
+        cols = simulated_telemetry(sim)
         present = np.isfinite(cols["yaw_deg"])
         _, _, rows = case_rows(s, len(present), present)
         runs = run_scenario(s, sim, cols, run=case, smooth=False, truth_scenario=flying,
