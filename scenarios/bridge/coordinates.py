@@ -56,8 +56,16 @@ def truth_torques(truth, model_torques, omega0_radps: float,
     ext = external_torque(truth)
     mt = model_torques
     kx, kz = (0.0, 0.0) if known_Nm is None else (known_Nm[:, 0], known_Nm[:, 1])
+    thruster = truth.torques["thruster"] if "thruster" in truth.torques else None
+    if thruster is not None:
+        # A firing is no environment torque: the torque states (Eqs. 9, 18) do not
+        # model it, so it stays whole in the residual rather than smeared over the
+        # window's constant and orbit-rate fit.
+        ext = ext - thruster
     states, res_x, res_z = em.project_torques(truth.t_s, ext[:, 0] - mt.roll_Nm - kx,
                                               ext[:, 2] - mt.yaw_Nm - kz, omega0_radps)
+    if thruster is not None:
+        res_x, res_z = res_x + thruster[:, 0], res_z + thruster[:, 2]
     return TruthTorques(euler312_rates(truth.euler_rad, truth.w_br_radps), states, res_x, res_z,
                         known_Nm)
 

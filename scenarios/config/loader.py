@@ -137,13 +137,20 @@ def apply_override(raw: dict, assignment: str, origin: str | None = None) -> Non
     if not all(keys):
         raise ScenarioError(f"{origin or '--set ' + assignment}: empty key in {path!r}")
     node = raw
-    for i, key in enumerate(keys[:-1]):
-        child = node.setdefault(key, {})
-        if not isinstance(child, dict):
-            raise ScenarioError(f"{'.'.join(keys[:i + 1])}: is a value, cannot set "
+    for i, key in enumerate(keys):
+        # An entry of a list by its index (events.0.time_s), as Monte Carlo keys are.
+        if isinstance(node, list):
+            if not (key.isdigit() and int(key) < len(node)):
+                raise ScenarioError(f"{'.'.join(keys[:i])}: has {len(node)} entries, no "
+                                    f"entry {key} to set {path} in")
+            key = int(key)
+        elif not isinstance(node, dict):
+            raise ScenarioError(f"{'.'.join(keys[:i])}: is a value, cannot set "
                                 f"{path} inside it")
-        node = child
-    node[keys[-1]] = _parse_yaml(text, origin or f"--set {path}")
+        if i == len(keys) - 1:
+            node[key] = _parse_yaml(text, origin or f"--set {path}")
+            return
+        node = node.setdefault(key, {}) if isinstance(node, dict) else node[key]
 
 
 def _union_label(part) -> bool:
