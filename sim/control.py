@@ -57,6 +57,9 @@ class Control:
     unloading_gain_per_s: float = 3e-4     # k_m
     torquer_max_Am2: float = 10.0
     momentum_direction_gain_per_s: float = 0.0  # k_d (0: off)
+    # After a wheel switch (``sim.events``): the yaw demand flies on the spacecraft's
+    # standby yaw wheel (``wheel_allocation``).
+    yaw_on_standby_wheel: bool = False
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -70,13 +73,33 @@ class Control:
             raise ValueError("momentum direction gain must be non-negative")
 
 
-def wheel_allocation(axes: np.ndarray) -> np.ndarray:
+def wheel_allocation(axes: np.ndarray, standby: int | None = None,
+                     switched: bool = False) -> np.ndarray:
     """Map a desired wheel-momentum rate (Ḣ_y, ḣ_z) to motor torques, (n × 2).
 
     Motor torques change the wheel momentum by Σ u_i a_i; the pseudo-inverse of
     the y–z rows of the axis matrix spreads the demand evenly over the wheels.
+
+    With a ``standby`` yaw wheel (axis ±z, ``Spacecraft.standby_wheel``) the others fly
+    both demands and the standby wheel none: it idles.  ``switched`` (after a wheel
+    switch) gives it the yaw demand, ḣ/a_z, and leaves the others only the pitch
+    demand with no yaw part: for the canted V pair, equal torques (the common mode),
+    so their differential, their share of h, stays where the switch found it.
     """
-    return np.linalg.pinv(np.asarray(axes, dtype=float).T[1:3, :])
+    m = np.asarray(axes, dtype=float).T[1:3, :]
+    if standby is None:
+        if switched:
+            raise ValueError("a wheel switch needs a standby yaw wheel")
+        return np.linalg.pinv(m)
+    flying = [i for i in range(m.shape[1]) if i != standby]
+    out = np.zeros((m.shape[1], 2))
+    pinv = np.linalg.pinv(m[:, flying])
+    out[flying, 0] = pinv[:, 0]
+    if switched:
+        out[standby, 1] = 1.0 / m[1, standby]
+    else:
+        out[flying, 1] = pinv[:, 1]
+    return out
 
 
 def control_law(c_br, w_br, wheel_speeds, field_r, prm, w_bn=None):

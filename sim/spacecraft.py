@@ -69,17 +69,29 @@ def check_inertia(j: np.ndarray, name: str = "inertia") -> np.ndarray:
 
 @dataclass(frozen=True)
 class Spacecraft:
-    """Rigid body plus wheels.  ``inertia_kgm2`` is the locked-wheel tensor J."""
+    """Rigid body plus wheels.  ``inertia_kgm2`` is the locked-wheel tensor J.
+
+    ``standby_wheel``, the index of a yaw reaction wheel (axis ±z) carried idle as the
+    backup of the others' yaw control: no command until a wheel switch
+    (``sim.control.wheel_allocation``); the others alone must span the y–z plane."""
 
     inertia_kgm2: tuple[tuple[float, float, float], ...] = GOES_NEXT_INERTIA_KGM2
     wheels: tuple[Wheel, ...] = field(default_factory=lambda: goes_next_wheels())
+    standby_wheel: int | None = None
 
     def __post_init__(self) -> None:
         check_inertia(np.asarray(self.inertia_kgm2))
         if len(self.wheels) < 1:
             raise ValueError("a momentum-biased spacecraft needs at least one wheel")
-        if np.linalg.matrix_rank(self.wheel_axes[:, 1:]) < 2:
+        flying = [i for i in range(self.n_wheels) if i != self.standby_wheel]
+        if np.linalg.matrix_rank(self.wheel_axes[flying, 1:]) < 2:
             raise ValueError("wheel axes must span the body y-z plane (pitch and yaw momentum)")
+        if self.standby_wheel is not None:
+            if not 0 <= self.standby_wheel < self.n_wheels:
+                raise ValueError(f"standby wheel {self.standby_wheel} is not one of the "
+                                 f"{self.n_wheels} wheels")
+            if abs(abs(self.wheel_axes[self.standby_wheel, 2]) - 1.0) > 1e-9:
+                raise ValueError("the standby wheel must be a yaw wheel, its axis along ±z")
 
     @property
     def J(self) -> np.ndarray:
@@ -145,9 +157,16 @@ def goes_next_wheels(spin_inertia_kgm2: float = GOES_NEXT_WHEEL_INERTIA_KGM2,
             Wheel(spin_inertia_kgm2, a2, speed_rpm * RPM))
 
 
-def goes_next(inertia_kgm2=GOES_NEXT_INERTIA_KGM2, **wheel_kwargs) -> Spacecraft:
-    """GOES-Next in its nominal two-momentum-wheel configuration."""
-    return Spacecraft(inertia_kgm2=inertia_kgm2, wheels=goes_next_wheels(**wheel_kwargs))
+def goes_next(inertia_kgm2=GOES_NEXT_INERTIA_KGM2, standby_yaw_wheel_inertia_kgm2=None,
+              **wheel_kwargs) -> Spacecraft:
+    """GOES-Next in its nominal two-momentum-wheel configuration; with
+    ``standby_yaw_wheel_inertia_kgm2``, also carrying the backup yaw reaction wheel
+    along +z, idle at 0 rpm (wheel 3, the ``standby_wheel``) until a wheel switch."""
+    wheels = goes_next_wheels(**wheel_kwargs)
+    if standby_yaw_wheel_inertia_kgm2 is None:
+        return Spacecraft(inertia_kgm2=inertia_kgm2, wheels=wheels)
+    rw = Wheel(standby_yaw_wheel_inertia_kgm2, (0.0, 0.0, 1.0), 0.0)
+    return Spacecraft(inertia_kgm2=inertia_kgm2, wheels=(*wheels, rw), standby_wheel=2)
 
 
 def goes_next_backup(inertia_kgm2=GOES_NEXT_INERTIA_KGM2,

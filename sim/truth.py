@@ -121,9 +121,11 @@ class TruthStream:
     whatever the run's length (the run's Sun nodes: 32 bytes per 128 samples).
 
     A ``schedule`` (``sim.events``) adds its thruster torques to the step's external
-    torque, recorded as the source ``thruster``, and flies its trim_tab and
-    array_offset commands from their sample on: the rollout is split there and the
-    parameters re-packed, as ``retrim`` does between windows."""
+    torque, recorded as the source ``thruster``, and flies its trim_tab,
+    array_offset and wheel_switch commands from their sample on: the rollout is split
+    there and the parameters re-packed, as ``retrim`` does between windows.  A wheel
+    switch (``switch_wheels``) needs the spacecraft's standby yaw wheel, which idles
+    until then, its motor's ripple off."""
 
     def __init__(self, spacecraft: Spacecraft, orbit: GeoOrbit, environment: Environment,
                  control: Control, initial: InitialState, epoch: datetime, duration_s: float,
@@ -179,17 +181,26 @@ class TruthStream:
                                         self.sun_nodes, aux_slice(nw, "t_mtq"), self.x)
         self.thrusters = bool(self.schedule.of_kind("thruster"))
         self.commands = self._command_samples()
+        # The sample the yaw demand moves to the standby wheel from (none: past the end).
+        self.switch_sample = min((k for k, es in self.commands.items()
+                                  if any(e.kind == "wheel_switch" for e in es)),
+                                 default=self.n_samples)
 
     def _command_samples(self) -> dict[int, list]:
         """The commands of the schedule by the sample they apply from, the first with
         t_k ≥ t (``sim.events``): the step from it on flies the new setting."""
         out: dict[int, list] = {}
         for e in self.schedule.commands(-np.inf, np.inf):
-            if e.kind not in COMMAND_FIELDS:
+            if e.kind == "wheel_switch":
+                if self.spacecraft.standby_wheel is None:
+                    raise ValueError("a wheel_switch needs a standby yaw wheel on board "
+                                     "(Spacecraft.standby_wheel)")
+            elif e.kind not in COMMAND_FIELDS:
                 raise ValueError(f"{e.kind} events are not flown by the truth")
-            field = COMMAND_FIELDS[e.kind]
-            if field not in {f.name for f in dataclasses.fields(self.environment.solar)}:
-                raise ValueError(f"{e.kind} events need the solar torque's {field}")
+            elif COMMAND_FIELDS[e.kind] not in {
+                    f.name for f in dataclasses.fields(self.environment.solar)}:
+                raise ValueError(f"{e.kind} events need the solar torque's "
+                                 f"{COMMAND_FIELDS[e.kind]}")
             k = max(0, int(np.ceil(e.t_s / self.dt_s)) - 1)
             while self._t(k) < e.t_s:     # exact against the samples' own times
                 k += 1
@@ -201,8 +212,19 @@ class TruthStream:
         """Fly the commands that apply from sample ``k``, before the piece from it rolls
         out (the parameters re-packed, as ``retrim`` does)."""
         for e in self.commands.get(k, ()):
+            if e.kind == "wheel_switch":
+                self.switch_wheels()
+                continue
             self.retrim(dataclasses.replace(self.environment.solar,
                                             **{COMMAND_FIELDS[e.kind]: float(e.angle_deg)}))
+
+    def switch_wheels(self) -> None:
+        """Fly the yaw demand on the standby yaw wheel from the next piece on
+        (``sim.control.wheel_allocation``): the parameters re-packed, nothing else
+        changes (the bias stays; no wheel fails)."""
+        self.control = dataclasses.replace(self.control, yaw_on_standby_wheel=True)
+        self.p = pack_params(self.spacecraft, self.orbit, self.environment, self.control,
+                             self.dt_s, self.managed)
 
     def retrim(self, solar) -> None:
         """Fly ``solar`` (a new trim-tab setting) from the next window on: the ground
@@ -318,6 +340,11 @@ class TruthStream:
             rows = inputs["ripple"][cut]
             self.rng.standard_normal(out=rows)
             rows *= self.sigma
+            if self.spacecraft.standby_wheel is not None:
+                # An idle motor, unpowered, makes no torque ripple: the standby wheel's
+                # draws (still drawn, so the stream is the same) count from its switch.
+                idle = int(np.clip(self.switch_sample - (a + lo), 0, hi - lo))
+                rows[:idle, self.spacecraft.standby_wheel] = 0.0
         if self.disturbance_draw is not None:
             rows = inputs["disturbance"][cut]
             self.disturbance_draw.fill(rows)

@@ -93,7 +93,8 @@ def build_spacecraft(s: Scenario) -> spacecraft.Spacecraft:
     if sc.configuration == "backup":
         return spacecraft.goes_next_backup(sc.inertia_kgm2, w.spin_inertia_kgm2, w.cant_deg,
                                            w.speed_rpm, sc.yaw_wheel.spin_inertia_kgm2)
-    return spacecraft.goes_next(sc.inertia_kgm2, spin_inertia_kgm2=w.spin_inertia_kgm2,
+    standby = sc.yaw_wheel.spin_inertia_kgm2 if sc.yaw_wheel.standby else None
+    return spacecraft.goes_next(sc.inertia_kgm2, standby, spin_inertia_kgm2=w.spin_inertia_kgm2,
                                 cant_deg=w.cant_deg, speed_rpm=w.speed_rpm)
 
 

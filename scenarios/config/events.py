@@ -34,7 +34,9 @@ class EventEntry(_Section):
     `maneuver` column is 1 while it fires), `sensor_outage` (`sensor` reads nothing
     for `duration_s`: its telemetry columns are empty), `trim_tab` and `array_offset`
     (the solar array's tab or offset commanded to `angle_deg` from the first sample at
-    or after the time on) and `wheel_switch` (not flown yet: rejected). A key another
+    or after the time on) and `wheel_switch` (from the first sample at or after the
+    time on, the yaw control flies on the backup yaw wheel, the canted pair keeping the
+    pitch control; needs `spacecraft.yaw_wheel.standby`, once a run). A key another
     kind uses is an error. Two occurrences of one kind may not overlap (outages: of one
     sensor; commands: at one time)."""
 
@@ -111,9 +113,24 @@ def _keys_problems(i: int, e: EventEntry) -> list[str]:
             if getattr(e, k) is None]
     if (e.time_s is None) == (e.time_utc is None):
         out.append(f"{where}.time_s: give the start as time_s or time_utc, exactly one")
-    if e.kind == "wheel_switch":
-        out.append(f"{where}.kind: wheel_switch is not flown yet (the truth does not switch "
-                   "to the backup yaw wheel mid-run)")
+    return out
+
+
+def _wheel_problems(s) -> list[str]:
+    """A wheel switch needs the standby yaw wheel on board, and happens once."""
+    switches = [i for i, e in enumerate(s.events) if e.kind == "wheel_switch"]
+    yaw_wheel = s.spacecraft.yaw_wheel
+    out = []
+    if yaw_wheel.standby and s.spacecraft.configuration == "backup":
+        out.append("spacecraft.yaw_wheel.standby: the backup configuration already flies the "
+                   "yaw wheel; standby is for the nominal one")
+    elif switches and not yaw_wheel.standby:
+        out.append(f"events[{switches[0]}].kind: a wheel_switch needs the backup yaw wheel on "
+                   "board from the start: set spacecraft.yaw_wheel.standby: true")
+    out += [f"events[{i}].kind: a second wheel_switch (events[{switches[0]}] switched "
+            "already); there is one backup yaw wheel" for i in switches[1:]]
+    out += [f"events[{i}].every_days: a wheel_switch happens once" for i in switches
+            if s.events[i].every_days is not None]
     return out
 
 
@@ -124,7 +141,7 @@ def _clash(kind: str) -> str:
 
 def event_problems(s) -> list[str]:
     """One line per problem of ``s.events`` (the module doc), each naming its key."""
-    problems, valid = [], []
+    problems, valid = _wheel_problems(s), []
     for i, e in enumerate(s.events):
         own = _keys_problems(i, e)
         problems += own

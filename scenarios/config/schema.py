@@ -215,7 +215,9 @@ _LATER_KEYS = (*((("sensors", *head), key, default) for head in
                # The array offset (issue 45): absent means the paper's array, Sun-normal.
                (("environment", "solar"), "array_offset_deg", 0.0),
                (("environment", "solar"), "offset_effectiveness_Nm_per_deg", 5e-7),
-               (("environment", "solar"), "untrimmed_offset_torque_Nm", 0.0))
+               (("environment", "solar"), "untrimmed_offset_torque_Nm", 0.0),
+               # The standby yaw wheel (issue 45's wheel_switch): absent means none.
+               (("spacecraft", "yaw_wheel"), "standby", False))
 
 
 def resolved_yaml(scenario: Scenario) -> str:
@@ -223,7 +225,8 @@ def resolved_yaml(scenario: Scenario) -> str:
     back to the same scenario.  The exceptions: ``environment.disturbance``,
     ``telemetry``, ``batch``, ``report``, ``events`` (each entry with its own keys
     only), ``momentum_management``, ``estimator.bias_states``, the outlier keys,
-    ``estimator.maneuver`` and the array offset's (``_LATER_KEYS``) are written only
+    ``estimator.maneuver``, the array offset's and ``spacecraft.yaw_wheel.standby``
+    (``_LATER_KEYS``) are written only
     when they differ from their defaults, so that a scenario without them resolves to
     the very text it did before they existed (its run directories, and the digest that
     resumes a Monte Carlo set, unchanged)."""

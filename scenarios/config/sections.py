@@ -68,6 +68,10 @@ class YawWheel(_Section):
     spin_inertia_kgm2: float = Field(spacecraft.GOES_NEXT_YAW_WHEEL_INERTIA_KGM2, gt=0,
                                      description="spin inertia; the wheel's speed cancels h "
                                      "(kg m²)")
+    standby: bool = Field(False, description="the nominal configuration carries it too, "
+                          "idle at 0 rpm (wheel 3, its tachometer in telemetry.csv's "
+                          "wheel3_rpm and in the filter's h) until a wheel_switch event "
+                          "gives it the yaw control")
 
 
 class Spacecraft(_Section):
