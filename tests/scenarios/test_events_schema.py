@@ -79,11 +79,20 @@ def test_each_bad_entry_gets_one_line_naming_its_key(capsys, tmp_path):
      "events[0].angle_deg", "finite"),
     ([{"kind": "thruster", "time_s": 10, "duration_s": 0, "torque_Nm": [0, 0, 1]}],
      "events[0].duration_s", "greater than 0"),
-    ([{"kind": "wheel_switch", "time_s": 10}], "events[0].kind", "not flown yet"),
+    ([{"kind": "wheel_switch", "time_s": 10}], "events[0].kind",
+     "needs the backup yaw wheel on board from the start: set spacecraft.yaw_wheel.standby"),
+    ([{"kind": "wheel_switch", "time_s": 10}, {"kind": "wheel_switch", "time_s": 20}],
+     "events[1].kind", "a second wheel_switch"),
+    ([{"kind": "wheel_switch", "time_s": 10, "every_days": 0.5}], "events[0].every_days",
+     "a wheel_switch happens once"),
+    ([{"kind": "wheel_switch", "time_s": 10, "angle_deg": 1}], "events[0].angle_deg",
+     "not a key of a wheel_switch event"),
 ])
 def test_a_bad_list_is_one_line_on_its_key(events, key, text):
+    standby = not text.startswith("needs the backup")
     with pytest.raises(ScenarioError) as info:
-        validate({"name": "x", "duration_s": DAY, "events": events})
+        validate({"name": "x", "duration_s": DAY, "events": events,
+                  "spacecraft": {"yaw_wheel": {"standby": standby}}})
     (line,) = info.value.problems
     assert line.startswith(f"{key}:") and text in line, line
 
@@ -147,3 +156,29 @@ def test_monte_carlo_disperses_an_events_time_and_torque():
     with pytest.raises(ScenarioError, match=r"events\.1\.time_s: not a numeric key"):
         validate(dict(GOOD, montecarlo={"dispersions": {
             "events.1.time_s": {"distribution": "normal", "sigma": 1}}}))
+
+
+def test_standby_is_for_the_nominal_configuration():
+    """The backup configuration flies the yaw wheel already: standby there is a line."""
+    with pytest.raises(ScenarioError) as info:
+        validate({"name": "x", "spacecraft": {"configuration": "backup",
+                                               "yaw_wheel": {"standby": True}}})
+    (line,) = info.value.problems
+    assert line.startswith("spacecraft.yaw_wheel.standby: the backup configuration"), line
+
+
+def test_standby_adds_wheel_3_and_leaves_the_resolved_yaml_alone_when_off(tmp_path):
+    """standby: the yaw wheel along +z at 0 rpm is wheel 3, its spin inertia in h's
+    factors (h = Σ I_w,i a_i·ẑ Ω_i, Eq. 2); off, scenario.yaml does not name it (the
+    digest of a Monte Carlo set unchanged), on, it does and loads back."""
+    plain = validate({"name": "x"})
+    assert "standby" not in resolved_yaml(plain)
+    s = validate({"name": "x", "spacecraft": {"yaw_wheel": {"standby": True}}})
+    sc = build.build_spacecraft(s)
+    assert sc.n_wheels == 3 and sc.standby_wheel == 2
+    assert tuple(sc.wheels[2].axis) == (0.0, 0.0, 1.0) and sc.wheels[2].speed_radps == 0.0
+    assert build.yaw_factors(s)[2] == 0.008626
+    assert list(build.yaw_factors(s)[:2]) == list(build.yaw_factors(plain))
+    path = tmp_path / "s.yaml"
+    path.write_text(resolved_yaml(s))
+    assert "standby: true" in path.read_text() and load_scenario(path) == s
