@@ -155,6 +155,21 @@ def run_365day(out: Path | None = None) -> tuple[float, float, float, float]:
     return wall, total, largest, size
 
 
+def managed_year_figures(equinox_wall_s: float | None = None) -> list[tuple[str, float, str]]:
+    """Issue 45: `dynprop run goes_next_year` (a year with momentum management: the
+    managed step and the daily solar loop), its wall time, memory and, given the
+    equinox year's wall time just before, the ratio (target ≤ 1.1×, peak unchanged)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        wall, total, largest = _watched([DYNPROP, "run", "goes_next_year", "--out",
+                                         str(Path(tmp) / "run")], "the managed year")
+    out = [("run_managed_365day_wall_s", wall, "s"),
+           ("run_managed_365day_peak_rss_MB", total, "MB"),
+           ("run_managed_365day_largest_process_rss_MB", largest, "MB")]
+    if equinox_wall_s is not None:
+        out.append(("run_managed_over_equinox_365day", wall / equinox_wall_s, "x"))
+    return out
+
+
 def report_figures(year: Path | None = None) -> list[tuple[str, float, str]]:
     """Issue 32: `dynprop report` as a user runs it (the whole command, start-up
     included) on the default two-day run (median of 5; target ≤ 2 s) and on a year's
@@ -479,7 +494,8 @@ def main() -> None:
             name = {"export": "export_figures"}.get(name, name)   # `make bench BENCH=export`
             if name in ("tune_figures", "batch_figures", "report_figures", "export_figures",
                         "estimate_figures", "page_30day_figures", "tune_30day_figures",
-                        "batch_30day_figures", "real_30day_figures"):
+                        "batch_30day_figures", "real_30day_figures",
+                        "managed_year_figures"):
                 for key, value, unit in globals()[name]():
                     report(key, value, unit)
                 continue
@@ -538,7 +554,11 @@ def main() -> None:
     year = None
     if os.environ.get("BENCH_QUICK") != "1":
         year = Path(year_dir.name) / "year"
-        for (key, unit), value in zip(YEAR_FIGURES, run_365day(year), strict=True):
+        year_figures = run_365day(year)
+        for (key, unit), value in zip(YEAR_FIGURES, year_figures, strict=True):
+            report(key, value, unit)
+        # Back to back with the equinox year, so the ratio sees the same machine.
+        for key, value, unit in managed_year_figures(year_figures[0]):
             report(key, value, unit)
     report("run_figures_2day_s", run_figures_2day_s(), "s")
     for key, value, unit in tune_figures():
