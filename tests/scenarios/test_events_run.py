@@ -1,8 +1,8 @@
 """Events through `dynprop run` and back through the telemetry readers.
 
-One hour of goes_next_equinox flown twice with the same seed: with events (an Earth,
+40 minutes of goes_next_equinox flown twice with the same seed: with events (an Earth,
 a Sun and a tachometer outage, then a thruster firing and a tab command) and without.
-Until the firing the two trucks fly the same truth and draw the same noise, so
+Until the firing the two runs fly the same truth and draw the same noise, so
 telemetry.csv must be the run without events' except that each outage's columns are
 empty on exactly its samples (t0 ≤ t < t0 + duration, counted here by hand) and
 nowhere else; the maneuver column is 1 on exactly the firing's samples; truth.csv
@@ -30,7 +30,7 @@ from scenarios.run.simulate import simulate
 
 DT = 0.512
 EARTH, SUN, TACH = (600.1, 300.0), (200.0, 400.0), (1000.0, 100.0)
-FIRE, TORQUE = (2000.0, 200.0), (2e-3, 0.0, -1e-3)
+FIRE, TORQUE = (1500.0, 200.0), (2e-3, 0.0, -1e-3)
 EVENTS = f"""\
 events:
   - {{kind: sensor_outage, time_s: {EARTH[0]}, duration_s: {EARTH[1]}, sensor: earth}}
@@ -38,7 +38,7 @@ events:
   - {{kind: sensor_outage, time_s: {TACH[0]}, duration_s: {TACH[1]}, sensor: tachometer}}
   - {{kind: thruster, time_s: {FIRE[0]}, duration_s: {FIRE[1]}, torque_Nm: {list(TORQUE)},
      label: momentum dump}}
-  - {{kind: trim_tab, time_s: 3000, angle_deg: 19.0}}
+  - {{kind: trim_tab, time_s: 2200, angle_deg: 19.0}}
 """
 COLUMNS = {"earth": ("roll_deg", "pitch_deg"),
            "sun": ("yaw_deg", "yaw_sigma_deg", "sun_head", "dss_alpha_deg", "dss_beta_deg",
@@ -53,7 +53,7 @@ def _inside(t: np.ndarray, span: tuple[float, float]) -> np.ndarray:
 
 def _run(tmp, name: str, events: str):
     path = tmp / f"{name}.yaml"
-    path.write_text(f"name: {name}\nduration_s: 3600\n{events}")
+    path.write_text(f"name: {name}\nduration_s: 2400\n{events}")
     out = tmp / name
     err = io.StringIO()
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
@@ -70,7 +70,7 @@ def runs(tmp_path_factory):
 def test_outages_empty_their_columns_on_exactly_their_samples(runs):
     with_ev, without = (read_csv(r / "telemetry.csv") for r in runs)
     t = without["t_s"]
-    assert np.array_equal(with_ev["t_s"], t) and len(t) == 7032
+    assert np.array_equal(with_ev["t_s"], t) and len(t) == 4688
     before = t < FIRE[0]        # the same truth and noise until the firing
     out_any = np.zeros(len(t), dtype=bool)
     for sensor, names in COLUMNS.items():
@@ -93,14 +93,14 @@ def test_maneuver_column_is_the_firing_and_only_with_events(runs):
     with_ev, without = (read_csv(r / "telemetry.csv") for r in runs)
     assert "maneuver" not in without
     assert np.array_equal(with_ev["maneuver"], _inside(with_ev["t_s"], FIRE).astype(float))
-    assert with_ev["maneuver"].sum() == 390     # samples 3907 (2000.384 s) … 4296
+    assert with_ev["maneuver"].sum() == 391     # samples 2930 (1500.16 s) … 3320
 
 
 def test_truth_records_the_firing_as_its_own_torque(runs):
     with_ev, without = (read_csv(r / "truth.csv") for r in runs)
     assert not any(c.startswith("thruster_") for c in without)
     inside = _inside(with_ev["t_s"], FIRE)
-    assert inside.sum() == 3          # the 64 s rows at 2048, 2112 and 2176 s
+    assert inside.sum() == 3          # the 64 s rows at 1536, 1600 and 1664 s
     for k, axis in enumerate("xyz"):
         col = with_ev[f"thruster_{axis}_Nm"]
         assert np.all(col[inside] == TORQUE[k]) and not col[~inside].any()
@@ -110,15 +110,15 @@ def test_summary_lists_the_events(runs):
     summary = json.loads((runs[0] / "summary.json").read_text())
     assert [(e["kind"], e["t_s"], e["end_s"]) for e in summary["events"]] == [
         ("sensor_outage", 200.0, 600.0), ("sensor_outage", 600.1, 900.1),
-        ("sensor_outage", 1000.0, 1100.0), ("thruster", 2000.0, 2200.0),
-        ("trim_tab", 3000.0, 3000.0)]
+        ("sensor_outage", 1000.0, 1100.0), ("thruster", 1500.0, 1700.0),
+        ("trim_tab", 2200.0, 2200.0)]
     assert summary["events"][3]["label"] == "momentum dump"
     assert "events" not in json.loads((runs[1] / "summary.json").read_text())
 
 
 def test_the_twin_is_out_when_the_truth_is(runs):
     """The linear twin's telemetry (its filter's input) has the same outages and flag."""
-    s = load_scenario(runs[0] / "scenario.yaml", ["duration_s=3100"])
+    s = load_scenario(runs[0] / "scenario.yaml", ["duration_s=2300"])
     sim = simulate(s)
     tt = truth_torques(sim.truth, s.estimator.model_torques, 7.2921e-5)
     _, twin_tel, _ = linear_twin(s, sim.truth, 0, s.estimator.model_torques, tt)

@@ -10,6 +10,7 @@ import pytest
 
 from sim import ephemeris
 from sim.control import Control
+from sim.disturbance import Disturbance
 from sim.environment import Environment, SolarTorque
 from sim.events import Event, Schedule, repeated
 from sim.frames import GeoOrbit, dcm_from_quat
@@ -120,6 +121,55 @@ def test_thruster_changes_inertial_momentum_by_its_impulse(fired):
     # In the large: the inertial change is N T to within the body's turn in T.
     assert np.linalg.norm(h_n[-1] - h_n[0]) == pytest.approx(np.linalg.norm(n) * k.size * DT,
                                                              rel=0.03)
+
+
+def _held_impulse(res, torque_b: np.ndarray) -> np.ndarray:
+    """Σ_k (∫ C_NR over step k) C_RB(t_k) N_k: a body torque held over each step, in
+    inertial axes (the orbit frame's integral by Simpson)."""
+    orbit = GeoOrbit()
+    gmst0 = ephemeris.gmst_rad(ephemeris.julian_date(EQUINOX))
+    t = res.t_s[:-1]
+    c_rb = np.swapaxes(dcm_from_quat(res.q_br[:-1]), -1, -2)
+    step = DT / 6 * sum(w * np.swapaxes(orbit.orbit_frame(t + dt, gmst0), -1, -2)
+                        for w, dt in ((1, 0.0), (4, DT / 2), (1, DT)))
+    return np.einsum("nij,njk,nk->i", step, c_rb, torque_b[:-1])
+
+
+def test_thruster_disturbance_and_extra_torque_all_fly(fired):
+    """With a disturbance and a caller's torque as well, the step flies the sum of the
+    three (each recorded apart): the momentum changes by their held impulse.  The
+    thruster's and the extra torque are this test's own; the disturbance's, a random
+    draw, is read from its record.  Tolerance as above, with the largest total torque
+    over the whole run."""
+    _, n = fired
+    sc = goes_next()
+    m = int(1200.0 / DT) + 1
+    extra = np.zeros((m, 3))
+    extra[:, 1] = 3e-3
+    res = simulate_truth(sc, GeoOrbit(), Environment.torque_free(),
+                         Control(magnetic_unloading=False), InitialState(), EQUINOX, 1200.0,
+                         DT, extra_torque=extra,
+                         disturbance=Disturbance("gauss_markov", sigma_Nm=(2e-3, 1e-3, 2e-3),
+                                                 correlation_time_s=60.0),
+                         disturbance_rng=np.random.default_rng(9),
+                         schedule=Schedule((Event("thruster", 200.1, 300.0, tuple(n)),)))
+    assert np.array_equal(res.torques["external"], extra)
+    assert np.abs(res.torques["disturbance"]).max() > 1e-3
+    total = (extra + res.torques["disturbance"]
+             + np.outer(_inside(200.1, 300.0, m), n))
+    h_b = res.w_bn_radps @ sc.J.T + sc.wheel_momentum(res.wheel_speeds_radps)
+    gmst0 = ephemeris.gmst_rad(ephemeris.julian_date(EQUINOX))
+    c_nb = np.swapaxes(GeoOrbit().orbit_frame(res.t_s, gmst0), -1, -2) \
+        @ np.swapaxes(dcm_from_quat(res.q_br), -1, -2)
+    h_n = np.einsum("nij,nj->ni", c_nb, h_b)
+    # The last sample's torque acts after the run: the momentum is taken at the last
+    # sample, so the impulse runs over the steps before it.
+    err = np.linalg.norm(h_n[-1] - h_n[0] - _held_impulse(res, total))
+    w_br = np.max(np.linalg.norm(res.w_br_radps, axis=1))
+    tol = 0.5 * DT * 1200.0 * w_br * np.max(np.linalg.norm(total, axis=1)) + 1e-11
+    one_step = DT * np.linalg.norm(n)
+    assert one_step > 5 * tol        # a firing a sample off is outside
+    assert err < tol, (err, tol)
 
 
 def test_thruster_torque_is_its_own_recorded_source(fired):
