@@ -35,18 +35,22 @@ WIDTH = 92                      # comment lines are wrapped here
 INDENT = "  "
 
 
-def _flow(value) -> str:
+def _flow(value, nested: bool = False) -> str:
     """A value as one line of YAML that the loader reads back to the same value:
     numbers as their shortest text (``reference.yaml_text``), strings quoted by
-    PyYAML wherever plain text would be read as something else."""
+    PyYAML wherever plain text would be read as something else; inside a flow
+    collection (``nested``) also where a comma or bracket would end it (an event's
+    label: "station keeping (10 N, ...)")."""
     if isinstance(value, str):
-        text = yaml.safe_dump(value, default_flow_style=True, allow_unicode=True,
-                              width=math.inf)
-        return text.removesuffix("\n").removesuffix("\n...")
+        text = yaml.safe_dump([value] if nested else value, default_flow_style=True,
+                              allow_unicode=True, width=math.inf)
+        text = text.removesuffix("\n").removesuffix("\n...")
+        return text[1:-1] if nested else text
     if isinstance(value, dict):
-        return "{" + ", ".join(f"{_flow(k)}: {_flow(v)}" for k, v in value.items()) + "}"
+        return "{" + ", ".join(f"{_flow(k, True)}: {_flow(v, True)}"
+                               for k, v in value.items()) + "}"
     if isinstance(value, list | tuple):
-        return "[" + ", ".join(_flow(v) for v in value) + "]"
+        return "[" + ", ".join(_flow(v, True) for v in value) + "]"
     return yaml_text(value)
 
 
