@@ -64,6 +64,7 @@ OWN_FIGURES = frozenset((
 OWN_FILES = frozenset((
     "scenario.yaml", "case_scenario.yaml", "summary.json", "truth.csv", "telemetry.csv",
     "estimate.csv", "smoothed.csv", "daily.csv", "comparison.npz", "trim_loop.csv",
+    "momentum_management.csv",
     "montecarlo.json", "montecarlo.npz", "montecarlo_case.json", "montecarlo_case.npz",
     "report.json", "report.md", "tune.json", "tune.md", "tuned_noise.yaml", "trim.json",
     "trim.md", "batch.json", "report.html",
