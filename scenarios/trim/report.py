@@ -236,6 +236,15 @@ def verify(s: Scenario, r: TrimResult, run_dir: Path, stage: Path, truth: bool,
     return result
 
 
+def _moved_tab(s) -> str:
+    """What moved the solar array's tab or offset during the run, or "" if nothing did:
+    the on-board solar management or a scheduled command (issue 45)."""
+    if s.momentum_management.solar.enabled:
+        return "momentum_management.solar, see momentum_management.csv"
+    kinds = sorted({e.kind for e in s.events if e.kind in ("trim_tab", "array_offset")})
+    return " and ".join(f"{k} events" for k in kinds)
+
+
 def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = None,
              telemetry: Path | None = None, do_verify: bool = False,
              overrides=(), windows: Windows = DAYS, block_rows: int | None = None) -> dict:
@@ -249,6 +258,10 @@ def run_trim(run_dir: Path, from_s: float | None = None, to_s: float | None = No
         raise TrimError(f"{run_dir}: this run moved its tab as it flew (trim.every_days, see "
                         "trim_loop.csv); dynprop trim needs a run flown at one tab setting")
     with read_run(Path(run_dir), telemetry, overrides, block_rows) as (s, source, truth):
+        moved = _moved_tab(s)
+        if moved:
+            raise TrimError(f"{run_dir}: this run moved its tab or array offset as it flew "
+                            f"({moved}); dynprop trim needs a run flown at one setting")
         r = kappa_from_source(s, source, _batch_of(s, source, from_s, to_s),
                               windows=windows)
         screened = source.screen

@@ -6,7 +6,8 @@ The first command moves the tab from 19.6° towards full trim (20°: κ = 5e-5 �
 2.5e-6 · 20 = 0) and the offset from 0 towards 1° (κ_o = 5e-7 − 5e-7 · 1 = 0), each
 past its null by the −H/τ unloading term, which is small after one day.  Seen
 failing with the command's sign flipped (the tab to 19.2°) and with
-momentum_management.csv left out of ``rundir.OWN_FILES`` (``--force`` refused)."""
+momentum_management.csv left out of ``rundir.OWN_FILES`` (``--force`` refused).
+`dynprop trim` refuses the run: its tab moved as it flew."""
 
 from __future__ import annotations
 
@@ -34,5 +35,16 @@ def test_the_first_command_heads_for_both_nulls_and_force_replaces_the_run(tmp_p
     summary = json.loads((out / "summary.json").read_text())
     assert summary["momentum_management"]["solar"]["file"] == "momentum_management.csv"
     assert summary["checks"]["linear_range"]["passed"]
+    rc, _, err = run_cli("trim", str(out))
+    assert rc == 2 and "moved its tab or array offset" in err and "momentum_management" in err
     rc, _, err = run_cli(*args, "--force")
     assert rc == 0, err
+
+
+def test_trim_refuses_a_run_whose_events_move_the_tab():
+    """`dynprop trim` fits one κ over its batch: a run whose tab moved cannot give one
+    (seen failing with the events left out of ``_moved_tab``)."""
+    from dynprop.scenarios.config.loader import load_scenario
+    from dynprop.scenarios.trim.report import _moved_tab
+    assert _moved_tab(load_scenario("goes_next_events")) == "trim_tab events"
+    assert _moved_tab(load_scenario("goes_next_equinox")) == ""
