@@ -25,6 +25,8 @@ class InputError(ValueError):
 # `dynprop run` streams in windows and takes any duration the schema allows.
 WHOLE_ARRAY_MAX_S = 30 * 86400.0
 LOOPLESS = ("simulate", "montecarlo", "linearization")   # they simulate without the filter
+# Where estimator.known_torques reaches the filter (or, simulate, the columns are written).
+KNOWN_TORQUE_COMMANDS = ("run", "montecarlo", "simulate")
 
 
 def _tuned(args) -> tuple[list[str], dict | None]:
@@ -69,6 +71,11 @@ def load_with_overrides(args, streams: bool = False):
         raise InputError(f"trim.every_days: the trim loop steers the truth from the filter's "
                          f"estimates, which only `dynprop run` carries; `dynprop "
                          f"{args.command}` would fly one tab: remove it or use `dynprop run`")
+    if s.estimator.known_torques and args.command not in KNOWN_TORQUE_COMMANDS:
+        raise InputError(f"estimator.known_torques: the torquers' dipoles reach the filter in "
+                         f"`dynprop run` and `montecarlo` only; `dynprop {args.command}` reads "
+                         "a telemetry file, whose readers do not carry torquer_*_Am2 columns "
+                         "yet: remove it")
     return s
 
 

@@ -55,3 +55,14 @@ def test_the_columns_are_written_only_when_needed(managed, tmp_path):
     assert not any(c.startswith("torquer_") for c in plain.columns)
     assert {"torquer_x_Am2", "torquer_y_Am2", "torquer_z_Am2"} <= set(
         pd.read_csv(managed / "telemetry.csv", comment="#", nrows=2).columns)
+
+
+def test_a_file_command_refuses_known_torques_in_one_line(managed, tmp_path):
+    """`estimate` reads a file whose readers do not carry the dipoles: one line, exit 2,
+    nothing written (it was an internal error before)."""
+    out = tmp_path / "est"
+    rc, _, err = run_cli("estimate", str(managed / "telemetry.csv"), "--scenario",
+                         "goes_next_equinox", "--set",
+                         "estimator.known_torques=[magnetic_control]", "--out", str(out))
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and "known_torques" in err
+    assert not out.exists()
