@@ -33,6 +33,7 @@ import numpy as np
 
 from .frames import dcm_from_quat
 from .spacecraft import Spacecraft
+from .sun_inputs import sun_on_grid
 
 DAY_S = 86400.0
 ABSORB_EVERY = 8   # steps between the torquer-impulse samples (SolarManager.absorb)
@@ -128,7 +129,6 @@ class SolarManager:
 
     def at_break(self, k: int, x: np.ndarray, solar):
         """The solar torque (``SolarTorque``) to fly from sample k, state x there."""
-        from .sun_inputs import sun_on_grid
         t = np.round(k * self.dt_s, 9)
         c_rn = self._c_rn(np.array([t]))[0]
         h_now = inertial_momentum(self.spacecraft, x, c_rn)
